@@ -1,0 +1,61 @@
+"""``shapemotion validate``, ``design`` and ``demo``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("validate", help="check a protocol file and summarise it",
+                              description="Validate a protocol YAML file and print a summary of its design.")
+    p.add_argument("protocol", type=Path)
+    p.set_defaults(func=run_validate)
+
+    p = subparsers.add_parser("design", help="expand a protocol into conditions, stimuli and trial lists",
+                              description="Write conditions.csv, trials.csv and design.json for a protocol.")
+    p.add_argument("protocol", type=Path)
+    p.add_argument("--participants", type=int, default=None, help="number of participants (default: the protocol's)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: the protocol's)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.set_defaults(func=run_design)
+
+    p = subparsers.add_parser("demo", help="run the whole chain on the bundled protocols",
+                              description="Run every step of shapemotion on the bundled protocols.")
+    p.add_argument("--out", type=Path, default=Path("demo_output"))
+    p.add_argument("--quick", action="store_true", help="smaller sizes everywhere (for tests)")
+    p.set_defaults(func=run_demo)
+
+
+def run_validate(args: argparse.Namespace) -> int:
+    from stimuli.design import build_design
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol(args.protocol)
+    design = build_design(protocol)
+    print(f"{args.protocol}: valid protocol '{protocol.name}'")
+    for f in protocol.factors:
+        print(f"  {f.name:<10} {f.role:<12} {', '.join(f.levels)}")
+    kinds = {k: sum(s.kind == k for s in design.stimuli) for k in ("test", "practice", "familiarization")}
+    per_participant = sum(t.participant == 1 and t.kind == "test" for t in design.trials)
+    print(f"  stimuli: {kinds['test']} test, {kinds['practice']} practice, {kinds['familiarization']} familiarization")
+    print(f"  {protocol.participants} participants, {len(design.blocks)} block(s), "
+          f"{per_participant} test trials per participant")
+    return 0
+
+
+def run_design(args: argparse.Namespace) -> int:
+    from stimuli.design import build_design, write_design
+    from stimuli.protocol import load_protocol
+
+    design = build_design(load_protocol(args.protocol), args.participants, args.seed)
+    for path in write_design(design, args.out):
+        print(path)
+    return 0
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    from stimuli.demo import run_demo as demo
+
+    demo(args.out, quick=args.quick)
+    return 0

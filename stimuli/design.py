@@ -1,0 +1,387 @@
+"""Design expansion: a protocol → its stimuli, blocks and seeded per-participant trial lists.
+
+>>> from stimuli.protocol import load_protocol
+>>> from stimuli.design import build_design
+>>> d = build_design(load_protocol("protocols/exp1_shape_motion.yaml"), participants=16, seed=1)
+>>> len([s for s in d.stimuli if s.kind == "test"])
+64
+>>> sum(1 for t in d.trials if t.participant == 1 and t.kind == "test")
+64
+
+Counterbalancing rules (all seeded, so the same protocol + seed gives the same lists):
+- between-subject groups: every cell of the between factors gets the same number of participants;
+- block order: ``counterbalanced`` uses the rows of a Williams Latin square (each block equally often
+  in each position and, for an even number of blocks, after each other block), dealt out evenly
+  within each between group; ``random`` shuffles per participant; ``fixed`` keeps the declared order;
+- side-by-side/row placement of an ``alternatives`` factor: ``within`` shows every arrangement to
+  everyone; ``between`` rotates arrangements over participants so every position is balanced;
+- trial order within a block is random with no stimulus twice in a row (when that is possible).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from stimuli.errors import StimuliError
+from stimuli.fileio import csv_text, write_all_or_nothing
+from stimuli.protocol import Protocol
+
+
+@dataclass(frozen=True)
+class Stimulus:
+    """One video clip to render: the factor levels it shows and where each alternative sits."""
+
+    stimulus_id: str
+    condition_id: str
+    kind: str                     # "test" | "practice" | "familiarization"
+    levels: dict[str, str]        # factor → level, for every factor that is not an alternatives factor
+    arrangement: tuple[str, ...] = ()   # alternatives levels by screen position (left → right)
+    body_actor: str = ""
+    motion_actor: str = ""
+
+    @property
+    def practice(self) -> bool:
+        return self.kind != "test"
+
+
+@dataclass(frozen=True)
+class Trial:
+    participant: int
+    groups: dict[str, str]        # between factor → level
+    block: int                    # 1-based position of the block in this participant's order
+    block_label: str
+    trial: int                    # 1-based within the participant
+    stimulus_id: str
+    repetition: int
+    kind: str
+
+    @property
+    def practice(self) -> bool:
+        return self.kind != "test"
+
+
+@dataclass
+class Design:
+    protocol: Protocol
+    participants: int
+    seed: int
+    stimuli: list[Stimulus]
+    trials: list[Trial]
+    blocks: list[str]                                   # block labels in declared order
+    block_orders: dict[int, list[str]] = field(default_factory=dict)  # participant → block labels
+
+    def stimulus(self, stimulus_id: str) -> Stimulus:
+        return self._by_id()[stimulus_id]
+
+    def _by_id(self) -> dict[str, Stimulus]:
+        return {s.stimulus_id: s for s in self.stimuli}
+
+
+# -- stimuli ------------------------------------------------------------------------------------
+
+def _safe(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "_.+" else "_" for c in text)
+
+
+def arrangements(protocol: Protocol) -> list[tuple[str, ...]]:
+    """Screen orders of the alternatives factor's levels (``[()]`` when there is none)."""
+    alternatives = protocol.factors_with_role("alternatives")
+    if not alternatives:
+        return [()]
+    levels = alternatives[0].levels
+    kind = protocol.alternatives.arrangements
+    if kind == "fixed":
+        return [tuple(levels)]
+    if kind == "latin_square":
+        return [tuple(levels[(i + j) % len(levels)] for j in range(len(levels))) for i in range(len(levels))]
+    return list(itertools.permutations(levels))
+
+
+def _actors_for(protocol: Protocol, levels: dict[str, str]) -> tuple[str, str]:
+    """Actor ids whose body and motion a stimulus shows (motion blank when another factor decides it)."""
+    sex_factor = protocol.factor_mapped_to("sex")
+    sex = levels.get(sex_factor.name) if sex_factor else None
+    body_factor = protocol.factor_mapped_to("body")
+    motion_factor = protocol.factor_mapped_to("motion")
+    body = protocol.actor(sex, levels[body_factor.name]).id if body_factor else protocol.display.body
+    motion = protocol.actor(sex, levels[motion_factor.name]).id if motion_factor else ""
+    return body or "", motion
+
+
+def _stimuli_for(protocol: Protocol, level_lists: list[list[str]], kind: str) -> list[Stimulus]:
+    names = [f.name for f in protocol.factors if f.role != "alternatives"]
+    prefix = "" if kind == "test" else "practice-"
+    out = []
+    for combo in itertools.product(*level_lists):
+        levels = dict(zip(names, combo))
+        condition_id = prefix + "-".join(_safe(v) for v in combo) if combo else prefix + "all"
+        body, motion = _actors_for(protocol, levels)
+        for arrangement in arrangements(protocol):
+            stimulus_id = condition_id + ("-" + "_".join(_safe(a) for a in arrangement) if arrangement else "")
+            out.append(Stimulus(stimulus_id, condition_id, kind, levels, arrangement, body, motion))
+    return out
+
+
+def test_stimuli(protocol: Protocol) -> list[Stimulus]:
+    """Every test condition crossed with every screen arrangement, factors in declared order."""
+    return _stimuli_for(protocol, [f.levels for f in protocol.factors if f.role != "alternatives"], "test")
+
+
+def practice_stimuli(protocol: Protocol) -> list[Stimulus]:
+    """Practice conditions: the test crossing with the practice-only levels substituted."""
+    if not protocol.practice.levels:
+        return []
+    lists = [protocol.practice.levels.get(f.name, f.levels) for f in protocol.factors if f.role != "alternatives"]
+    return _stimuli_for(protocol, lists, "practice")
+
+
+def familiarization_stimuli(protocol: Protocol) -> list[Stimulus]:
+    """One clip per test body (per sex), to be shown before the blocks in which those bodies appear."""
+    if not protocol.familiarization.enabled:
+        return []
+    body_factor = protocol.factor_mapped_to("body")
+    if body_factor is None:
+        raise StimuliError("familiarization.enabled: needs a factor that maps to body")
+    sex_factor = protocol.factor_mapped_to("sex")
+    out = []
+    for sex in sex_factor.levels if sex_factor else [None]:
+        for label in body_factor.levels:
+            actor = protocol.actor(sex, label)
+            levels = {body_factor.name: label} | ({sex_factor.name: sex} if sex_factor else {})
+            out.append(Stimulus(f"fam-{actor.id}", f"fam-{actor.id}", "familiarization", levels, (), actor.id, ""))
+    return out
+
+
+# -- blocks and orders --------------------------------------------------------------------------
+
+def williams_orders(k: int) -> list[list[int]]:
+    """Rows of a Williams Latin square: balanced for position and (even k) first-order carry-over."""
+    if k == 1:
+        return [[0]]
+    first, low, high = [0], 1, k - 1
+    for i in range(1, k):
+        first.append(low if i % 2 else high)
+        low, high = (low + 1, high) if i % 2 else (low, high - 1)
+    rows = [[(x + r) % k for x in first] for r in range(k)]
+    if k % 2:
+        rows += [list(reversed(row)) for row in rows]
+    return rows
+
+
+def block_cells(protocol: Protocol) -> list[dict[str, str]]:
+    """The blocks in declared order, each a mapping from block factor to level ([{}] = one block)."""
+    names = protocol.blocks.by
+    return [dict(zip(names, combo)) for combo in itertools.product(*(protocol.factor(n).levels for n in names))]
+
+
+def block_label(cell: dict[str, str]) -> str:
+    return "|".join(f"{k}={v}" for k, v in cell.items()) or "all"
+
+
+def shuffle_no_repeats(items: list[str], rng: np.random.Generator) -> list[str]:
+    """A random order of ``items`` with no element twice in a row, when such an order exists.
+
+    >>> import numpy as np
+    >>> order = shuffle_no_repeats(["a", "a", "b", "b", "c"], np.random.default_rng(0))
+    >>> all(x != y for x, y in zip(order, order[1:]))
+    True
+    """
+    counts = Counter(items)
+    keys = list(dict.fromkeys(items))
+    if counts and max(counts.values()) > (len(items) + 1) // 2:
+        return [items[i] for i in rng.permutation(len(items))]  # impossible: plain shuffle
+    out, previous = [], None
+    for _ in range(len(items)):
+        candidates = [k for k in keys if counts[k] and k != previous and _feasible(counts, k)]
+        weights = np.array([counts[k] for k in candidates], dtype=float)
+        previous = candidates[rng.choice(len(candidates), p=weights / weights.sum())]
+        counts[previous] -= 1
+        out.append(previous)
+    return out
+
+
+def _feasible(counts: Counter, chosen: str) -> bool:
+    """After taking ``chosen``, can the rest be ordered without repeats and not start with ``chosen``?"""
+    rest = counts.copy()
+    rest[chosen] -= 1
+    n = sum(rest.values())
+    return all(c <= (n + 1) // 2 for c in rest.values()) and rest[chosen] <= n // 2
+
+
+def _balanced_labels(n: int, k: int, rng: np.random.Generator) -> list[int]:
+    """``n`` labels from ``range(k)`` as evenly as possible, in random order."""
+    return [int(x) for x in rng.permutation([i % k for i in range(n)])]
+
+
+# -- participants -------------------------------------------------------------------------------
+
+def build_design(protocol: Protocol, participants: int | None = None, seed: int | None = None) -> Design:
+    """Expand a protocol into stimuli and a trial list for each participant (1…N)."""
+    n = protocol.participants if participants is None else participants
+    seed = protocol.seed if seed is None else seed
+    if n < 1:
+        raise StimuliError(f"--participants: expected a positive number, got {n}")
+    between = protocol.factors_with_role("between")
+    group_cells = [dict(zip([f.name for f in between], c)) for c in itertools.product(*(f.levels for f in between))]
+    if n % len(group_cells):
+        raise StimuliError(f"--participants: {n} participants cannot be balanced over {len(group_cells)} "
+                           f"between-subject groups ({', '.join(f.name for f in between)}); use a multiple of "
+                           f"{len(group_cells)}")
+    rng = np.random.default_rng(seed)
+    tests, practices, familiar = test_stimuli(protocol), practice_stimuli(protocol), familiarization_stimuli(protocol)
+    blocks = block_cells(protocol)
+    orders = williams_orders(len(blocks)) if protocol.blocks.order == "counterbalanced" else None
+
+    group_of = _balanced_labels(n, len(group_cells), rng)
+    trials: list[Trial] = []
+    block_orders: dict[int, list[str]] = {}
+    for g, groups in enumerate(group_cells):
+        members = [p for p in range(n) if group_of[p] == g]
+        order_of = _balanced_labels(len(members), len(orders), rng) if orders else [0] * len(members)
+        for rank, p in enumerate(members):
+            if protocol.blocks.order == "random":
+                order = [int(i) for i in rng.permutation(len(blocks))]
+            else:
+                order = orders[order_of[rank]] if orders else list(range(len(blocks)))
+            block_orders[p + 1] = [block_label(blocks[i]) for i in order]
+            trials += _participant_trials(protocol, p + 1, rank, groups, [blocks[i] for i in order],
+                                          tests, practices, familiar, rng)
+    trials.sort(key=lambda t: (t.participant, t.trial))
+    return Design(protocol, n, seed, tests + practices + familiar, trials,
+                  [block_label(b) for b in blocks], dict(sorted(block_orders.items())))
+
+
+def _matches(stimulus: Stimulus, cell: dict[str, str]) -> bool:
+    return all(stimulus.levels.get(k, v) == v for k, v in cell.items())
+
+
+def _participant_trials(protocol, participant, rank, groups, blocks, tests, practices, familiar, rng):
+    n_arrangements = len(arrangements(protocol))
+    between_arrangement = protocol.alternatives.counterbalance == "between" and n_arrangements > 1
+    conditions = list(dict.fromkeys(s.condition_id for s in tests))
+    trials, number = [], 0
+
+    def add(stimulus_id: str, position: int, repetition: int, kind: str) -> None:
+        nonlocal number
+        number += 1
+        trials.append(Trial(participant, groups, position, block_label(cell), number, stimulus_id, repetition, kind))
+
+    for position, cell in enumerate(blocks, start=1):
+        scope = groups | cell
+        fam = [s for s in familiar if _matches(s, scope)]
+        for s in _familiarization_order(protocol, fam):
+            add(s.stimulus_id, position, 1, "familiarization")
+        pool = [s.stimulus_id for s in practices if _matches(s, scope)]
+        if protocol.practice.per_block and pool:
+            chosen = [pool[i] for i in _practice_pick(len(pool), protocol.practice.per_block, rng)]
+            for sid in shuffle_no_repeats(chosen, rng):
+                add(sid, position, 1, "practice")
+        block_tests = [s for s in tests if _matches(s, scope)]
+        if between_arrangement:  # one arrangement per condition, rotated over participants
+            block_tests = [s for s in block_tests
+                           if arrangements(protocol).index(s.arrangement)
+                           == (rank + conditions.index(s.condition_id)) % n_arrangements]
+        ids = [s.stimulus_id for s in block_tests] * protocol.repetitions
+        seen: Counter = Counter()
+        for sid in shuffle_no_repeats(ids, rng):
+            seen[sid] += 1
+            add(sid, position, seen[sid], "test")
+    return trials
+
+
+def _practice_pick(available: int, wanted: int, rng) -> list[int]:
+    """``wanted`` practice items: whole shuffled copies of the pool, then a random part of one."""
+    picks = []
+    while len(picks) < wanted:
+        picks += [int(i) for i in rng.permutation(available)]
+    return picks[:wanted]
+
+
+def _familiarization_order(protocol: Protocol, stimuli: list[Stimulus]) -> list[Stimulus]:
+    order = protocol.familiarization.order
+    if order == "declared":
+        return stimuli
+    bmi = {a.id: a.bmi for a in protocol.actors}
+    return sorted(stimuli, key=lambda s: bmi[s.body_actor], reverse=order == "bmi_descending")
+
+
+# -- files ----------------------------------------------------------------------------------------
+
+def _alternative_columns(protocol: Protocol, arrangement: tuple[str, ...]) -> dict[str, str]:
+    alternatives = protocol.factors_with_role("alternatives")
+    if not alternatives:
+        return {}
+    if len(alternatives[0].levels) == 2:
+        return {"left": arrangement[0] if arrangement else "", "right": arrangement[1] if arrangement else ""}
+    return {"positions": "|".join(arrangement)}
+
+
+def conditions_rows(design: Design) -> list[dict[str, object]]:
+    """Rows of ``conditions.csv``: one per stimulus."""
+    p = design.protocol
+    factor_names = [f.name for f in p.factors if f.role != "alternatives"]
+    rows = []
+    for s in design.stimuli:
+        row = {"condition_id": s.condition_id} | {n: s.levels.get(n, "") for n in factor_names}
+        row |= {"stimulus_id": s.stimulus_id, "practice": int(s.practice), "kind": s.kind,
+                "body_actor": s.body_actor, "motion_actor": s.motion_actor}
+        rows.append(row | _alternative_columns(p, s.arrangement))
+    return rows
+
+
+def trials_rows(design: Design) -> list[dict[str, object]]:
+    """Rows of ``trials.csv``: one per participant × trial, in presentation order."""
+    p = design.protocol
+    by_id = design._by_id()
+    between = [f.name for f in p.factors_with_role("between")]
+    rows = []
+    for t in design.trials:
+        row = {"participant": t.participant} | {n: t.groups[n] for n in between}
+        row |= {"block": t.block, "block_label": t.block_label, "trial": t.trial, "stimulus_id": t.stimulus_id,
+                "repetition": t.repetition, "practice": int(t.practice), "kind": t.kind}
+        rows.append(row | _alternative_columns(p, by_id[t.stimulus_id].arrangement))
+    return rows
+
+
+def design_json(design: Design) -> dict:
+    """Everything the analysis half needs to know about the experiment, as plain JSON."""
+    p = design.protocol
+    alternatives = p.factors_with_role("alternatives")
+    response = p.response.model_dump() | {
+        "k": len(p.response.labels) if p.response.type == "likert" else len(alternatives[0].levels),
+        "position_labels": p.display.labels or ([] if not alternatives else
+                                                (["left", "right"] if len(alternatives[0].levels) == 2 else [])),
+    }
+    analysis_within = [f.name for f in p.factors if f.role == "within"] + [f.name for f in alternatives]
+    return {
+        "generator": "shapemotion 0.1.0",
+        "name": p.name,
+        "participants": design.participants,
+        "seed": design.seed,
+        "factors": [{"name": f.name, "role": f.role, "levels": f.levels, "maps_to": f.maps_to,
+                     "abbreviations": {lv: f.abbreviation(lv) for lv in f.levels}} for f in p.factors],
+        "response": response,
+        "dependent_measure": p.analysis.dependent_measure,
+        "chosen_factor": alternatives[0].name if alternatives else None,
+        "analysis": {"within": analysis_within, "between": [f.name for f in p.factors_with_role("between")],
+                     "alpha": p.analysis.alpha, "posthoc": p.analysis.posthoc},
+        "repetitions": p.repetitions,
+        "blocks": design.blocks,
+        "block_orders": {str(k): v for k, v in design.block_orders.items()},
+        "stimuli": [asdict(s) | {"arrangement": list(s.arrangement), "practice": s.practice} for s in design.stimuli],
+        "protocol": p.to_json_dict(),
+    }
+
+
+def write_design(design: Design, out_dir) -> list:
+    """Write ``conditions.csv``, ``trials.csv`` and ``design.json`` into ``out_dir`` (each atomically)."""
+    return write_all_or_nothing(out_dir, {
+        "conditions.csv": csv_text(conditions_rows(design)),
+        "trials.csv": csv_text(trials_rows(design)),
+        "design.json": json.dumps(design_json(design), indent=2) + "\n",
+    })

@@ -1,0 +1,398 @@
+"""Protocol files: the researcher's description of an experiment, validated with pydantic.
+
+A protocol is YAML (read with ``yaml.safe_load``). :func:`load_protocol` turns it into a
+:class:`Protocol`, or raises :class:`~stimuli.errors.StimuliError` with one paragraph naming the
+file, the field, the YAML line and what was expected.
+
+>>> from stimuli.protocol import load_protocol
+>>> p = load_protocol("protocols/exp1_shape_motion.yaml")
+>>> [f.name for f in p.factors]
+['SEX', 'GAIT', 'BODY', 'MOTION']
+>>> p.actor("F", "Hi1").bmi
+28.1
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from stimuli.errors import StimuliError
+
+# What a factor's levels mean on screen.
+MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "parameter", "source", "view", "none"]
+SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+
+
+class Strict(BaseModel):
+    """Base model: unknown fields are errors (a typo must not be silently ignored)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Actor(Strict):
+    """A person whose body (and motion) the stimuli show. Units: metres, kg/m²."""
+
+    id: str
+    label: str
+    sex: Literal["F", "M"]
+    height_m: float = Field(ge=1.2, le=2.3, description="standing height in metres")
+    bmi: float = Field(ge=13.0, le=60.0, description="body-mass index in kg/m²")
+    group: str | None = None
+    waist_m: float | None = Field(default=None, ge=0.4, le=2.0)
+    hip_m: float | None = Field(default=None, ge=0.5, le=2.0)
+    chest_m: float | None = Field(default=None, ge=0.5, le=2.0)
+    body_fat_pct: float | None = Field(default=None, ge=0.0, le=70.0)
+    practice_only: bool = False
+
+    @field_validator("id", "label")
+    @classmethod
+    def _safe(cls, value: str) -> str:
+        if not SAFE_ID.match(value):
+            raise ValueError(f"{value!r} must use letters, digits, '_', '-', '.' or '+' only")
+        return value
+
+    @property
+    def weight_kg(self) -> float:
+        return self.bmi * self.height_m**2
+
+
+class Factor(Strict):
+    """An independent variable: its levels, who varies it (between/within) and what it shows."""
+
+    name: str
+    role: Literal["between", "within", "alternatives"]
+    levels: list[str] = Field(min_length=2)
+    maps_to: MapsTo = "none"
+    abbreviations: dict[str, str] = {}
+    level_settings: dict[str, dict[str, float | str]] = {}
+
+    @field_validator("levels", mode="before")
+    @classmethod
+    def _levels_as_text(cls, value):
+        return [str(v) for v in value] if isinstance(value, list) else value
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, value: str) -> str:
+        if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", value):
+            raise ValueError(f"factor name {value!r} must start with a letter and use letters, digits or '_'")
+        return value
+
+    @model_validator(mode="after")
+    def _levels_known(self) -> "Factor":
+        if len(set(self.levels)) != len(self.levels):
+            raise ValueError(f"levels of {self.name} repeat: {self.levels}")
+        for level in self.levels:
+            if not SAFE_ID.match(level):
+                raise ValueError(f"level {level!r} of {self.name} must use letters, digits, '_', '-', '.' or '+'")
+        for where in (self.abbreviations, self.level_settings):
+            unknown = sorted(set(where) - set(self.levels))
+            if unknown:
+                raise ValueError(f"{unknown} are not levels of {self.name} (levels: {self.levels})")
+        return self
+
+    def abbreviation(self, level: str) -> str:
+        return self.abbreviations.get(level, level)
+
+
+class GaitSpec(Strict):
+    cadence_spm: float = Field(gt=40, lt=260, description="steps per minute")
+    speed_mps: float = Field(gt=0.2, lt=6.0, description="belt speed in m/s")
+
+
+class Camera(Strict):
+    azimuth_deg: float = 30.0
+    elevation_deg: float = 10.0
+    distance_m: float = Field(default=4.0, gt=0.5, le=50)
+    fov_deg: float = Field(default=40.0, gt=5, lt=150)
+
+
+class ClipSettings(Strict):
+    duration_s: float = Field(gt=0, le=120)
+    cycles: int = Field(default=2, ge=1)
+    fps: int = Field(default=30, ge=5, le=240)
+    width: int = Field(default=1280, ge=64, le=7680)
+    height: int = Field(default=720, ge=64, le=4320)
+    camera: Camera = Camera()
+    background: str = "#ffffff"
+    loop: bool = True
+
+
+class Display(Strict):
+    """How a stimulus is shown. ``alternatives`` clips put the levels of one factor side by side."""
+
+    layout: Literal["treadmill", "side_by_side", "point_light", "row"]
+    labels: list[str] | None = None
+    body: str | None = Field(default=None, description="actor id whose body is shown when no factor maps to body")
+    point_light_markers: int | None = Field(default=None, ge=5, le=40)
+
+
+class Alternatives(Strict):
+    """Counterbalancing of the positions of an ``alternatives`` factor's levels on screen.
+
+    ``arrangements``: ``all`` (every permutation), ``latin_square`` (k cyclic shifts, each level
+    once in each position), ``fixed`` (the declared order only). ``counterbalance``: ``within``
+    (every participant sees every arrangement) or ``between`` (each participant sees one
+    arrangement per condition, rotated so positions balance over participants).
+    """
+
+    arrangements: Literal["all", "latin_square", "fixed"] = "all"
+    counterbalance: Literal["within", "between"] = "within"
+
+
+class Blocks(Strict):
+    by: list[str] = []
+    order: Literal["counterbalanced", "random", "fixed"] = "counterbalanced"
+
+
+class Practice(Strict):
+    """Practice trials before each block, built from practice-only levels (not used in the test)."""
+
+    per_block: int = Field(default=0, ge=0)
+    levels: dict[str, list[str]] = {}
+
+    @field_validator("levels", mode="before")
+    @classmethod
+    def _as_text(cls, value):
+        return {k: [str(v) for v in vs] for k, vs in value.items()} if isinstance(value, dict) else value
+
+
+class Familiarization(Strict):
+    """Before each block, the block's bodies shown one by one (e.g. in increasing BMI order)."""
+
+    enabled: bool = False
+    order: Literal["bmi_ascending", "bmi_descending", "declared"] = "bmi_ascending"
+
+
+class Response(Strict):
+    type: Literal["likert", "afc", "ranking"]
+    question: str
+    labels: list[str] = []
+    instructions: str = ""
+
+    @model_validator(mode="after")
+    def _labels(self) -> "Response":
+        if self.type == "likert" and len(self.labels) < 2:
+            raise ValueError("a likert response needs at least 2 labels (e.g. 'Very Inconsistent' … 'Very Consistent')")
+        return self
+
+
+class Assignment(Strict):
+    method: Literal["balanced"] = "balanced"
+
+
+class Analysis(Strict):
+    dependent_measure: Literal["mean_rating", "percent_chosen", "votes", "rank_points"]
+    alpha: float = Field(default=0.05, gt=0, lt=1)
+    posthoc: Literal["tukey", "none"] = "tukey"
+
+
+class Protocol(Strict):
+    """A whole experiment. See ``protocols/*.yaml`` for annotated examples."""
+
+    name: str
+    title: str = ""
+    seed: int = Field(ge=0)
+    participants: int = Field(ge=1, le=100_000)
+    actors: list[Actor] = []
+    factors: list[Factor] = Field(min_length=1)
+    gaits: dict[str, GaitSpec] = {}
+    display: Display
+    alternatives: Alternatives = Alternatives()
+    clip: ClipSettings
+    blocks: Blocks = Blocks()
+    repetitions: int = Field(default=1, ge=1, le=20)
+    practice: Practice = Practice()
+    familiarization: Familiarization = Familiarization()
+    response: Response
+    assignment: Assignment = Assignment()
+    analysis: Analysis
+    consent: str = ""
+    source: str = ""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Protocol":
+        check_consistency(self)
+        return self
+
+    # -- look-ups -------------------------------------------------------------------------------
+    def factor(self, name: str) -> Factor:
+        for factor in self.factors:
+            if factor.name == name:
+                return factor
+        raise KeyError(name)
+
+    def factors_with_role(self, role: str) -> list[Factor]:
+        return [f for f in self.factors if f.role == role]
+
+    def factor_mapped_to(self, maps_to: str) -> Factor | None:
+        return next((f for f in self.factors if f.maps_to == maps_to), None)
+
+    def actor(self, sex: str | None, label: str) -> Actor:
+        """The actor with this label (and sex, when the protocol has a SEX-like factor)."""
+        matches = [a for a in self.actors if a.label == label and (sex is None or a.sex == sex)]
+        if len(matches) != 1:
+            raise KeyError(f"{sex}/{label}")
+        return matches[0]
+
+    def to_json_dict(self) -> dict:
+        return json.loads(self.model_dump_json())
+
+
+def check_consistency(p: Protocol) -> None:
+    """Cross-field rules pydantic cannot express per field. Raises ValueError naming the field."""
+    names = [f.name for f in p.factors]
+    if len(set(names)) != len(names):
+        raise ValueError(f"factors: names repeat: {names}")
+    ids = [a.id for a in p.actors]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"actors: ids repeat: {sorted(i for i in ids if ids.count(i) > 1)}")
+    alternatives = p.factors_with_role("alternatives")
+    if len(alternatives) > 1:
+        raise ValueError("factors: at most one factor may have role 'alternatives'")
+    if alternatives and p.display.layout == "treadmill":
+        raise ValueError("display.layout: 'treadmill' shows one clip; an 'alternatives' factor needs side_by_side or row")
+    if alternatives and p.display.layout == "side_by_side" and len(alternatives[0].levels) != 2:
+        raise ValueError(f"display.layout: side_by_side shows 2 clips but {alternatives[0].name} has "
+                         f"{len(alternatives[0].levels)} levels; use layout 'row'")
+    if p.response.type == "afc" and not alternatives:
+        raise ValueError("response.type: 'afc' needs a factor with role 'alternatives' (the choices)")
+    if p.response.type == "ranking" and not alternatives:
+        raise ValueError("response.type: 'ranking' needs a factor with role 'alternatives' (what is ranked)")
+    for name in p.blocks.by:
+        if name not in names:
+            raise ValueError(f"blocks.by: unknown factor {name!r} (factors: {names})")
+        if p.factor(name).role != "within":
+            raise ValueError(f"blocks.by: {name} is a {p.factor(name).role} factor; blocks must be within factors")
+    _check_practice(p, names)
+    _check_screen_mapping(p)
+    between_cells = 1
+    for f in p.factors_with_role("between"):
+        between_cells *= len(f.levels)
+    if p.participants % between_cells:
+        raise ValueError(
+            f"participants: {p.participants} participants cannot be balanced over {between_cells} between-subject "
+            f"groups; use a multiple of {between_cells}")
+
+
+def _check_practice(p: Protocol, names: list[str]) -> None:
+    for name, levels in p.practice.levels.items():
+        if name not in names:
+            raise ValueError(f"practice.levels: unknown factor {name!r} (factors: {names})")
+        clash = sorted(set(levels) & set(p.factor(name).levels))
+        if clash:
+            raise ValueError(f"practice.levels.{name}: {clash} are test levels; practice must use other levels")
+    if p.practice.per_block and not p.practice.levels:
+        raise ValueError("practice.per_block > 0 needs practice.levels (the practice-only levels to show)")
+
+
+def _check_screen_mapping(p: Protocol) -> None:
+    """Levels that name actors or gaits must exist, so that every stimulus can be made."""
+    if p.display.body is not None and p.display.body not in {a.id for a in p.actors}:
+        raise ValueError(f"display.body: {p.display.body!r} is not an actor id (actors: {[a.id for a in p.actors]})")
+    if p.display.body is None and p.factor_mapped_to("body") is None:
+        raise ValueError("display.body: no factor maps to body, so display.body must name the actor whose body is shown")
+    labels = p.display.labels
+    alternatives = p.factors_with_role("alternatives")
+    if labels is not None and alternatives and len(labels) != len(alternatives[0].levels):
+        raise ValueError(f"display.labels: {len(labels)} labels for {len(alternatives[0].levels)} alternatives "
+                         f"of {alternatives[0].name}")
+    sex_factor = p.factor_mapped_to("sex")
+    sexes = sex_factor.levels if sex_factor else [None]
+    for f in p.factors:
+        practice = p.practice.levels.get(f.name, [])
+        if f.maps_to in ("body", "motion"):
+            for sex in sexes:
+                for level in f.levels + practice:
+                    if not any(a.label == level and (sex is None or a.sex == sex) for a in p.actors):
+                        who = f"sex {sex}, " if sex else ""
+                        raise ValueError(f"factors.{f.name}: level {level!r} names no actor ({who}label {level!r}); "
+                                         f"declare it under actors")
+        if f.maps_to == "sex":
+            bad = sorted(set(f.levels) - {"F", "M"})
+            if bad:
+                raise ValueError(f"factors.{f.name}: sex levels must be F or M, got {bad}")
+        if f.maps_to == "gait":
+            missing = sorted(set(f.levels) - set(p.gaits))
+            if missing:
+                raise ValueError(f"factors.{f.name}: gait levels {missing} are not declared under gaits")
+
+
+# -- loading ------------------------------------------------------------------------------------
+
+def load_protocol(path: str | Path) -> Protocol:
+    """Read and validate a protocol file; every problem becomes a :class:`StimuliError`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise StimuliError(f"{path}: protocol file not found") from None
+    except (UnicodeDecodeError, IsADirectoryError) as exc:
+        raise StimuliError(f"{path}: cannot read the protocol as UTF-8 text ({exc})") from None
+    return parse_protocol(text, source=str(path))
+
+
+def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
+    try:
+        data = yaml.safe_load(text)
+        root = yaml.compose(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise StimuliError(f"{source}:{where}: YAML syntax error: {problem}") from None
+    if not isinstance(data, dict):
+        raise StimuliError(f"{source}: a protocol must be a YAML mapping (name:, factors:, …), got {type(data).__name__}")
+    try:
+        return Protocol.model_validate(data)
+    except ValidationError as exc:
+        raise StimuliError(describe_validation_error(exc, source, root)) from None
+
+
+def describe_validation_error(exc: ValidationError, source: str, root) -> str:
+    """One paragraph: every problem as 'field (line N): message', fields in dotted form."""
+    parts = []
+    for err in exc.errors():
+        loc = list(err["loc"])
+        message = err["msg"].removeprefix("Value error, ")
+        named = re.match(r"^([A-Za-z_][\w.]*): (.*)$", message, re.S)
+        if not loc and named:  # a cross-field rule names its own field: "blocks.by: …"
+            loc = [int(x) if x.isdigit() else x for x in named.group(1).split(".")]
+            message = named.group(2)
+        field = ".".join(str(x) for x in loc) if loc else "(top level)"
+        line = _line_of(root, loc)
+        where = f" (line {line})" if line else ""
+        if err["type"] == "extra_forbidden":
+            message = "unknown field (check the spelling; see protocols/*.yaml for the known fields)"
+        elif err["type"] == "missing":
+            message = "required field is missing"
+        elif "input" in err and err["type"] not in ("value_error",):
+            message += f" (got {err['input']!r})"
+        parts.append(f"{field}{where}: {message}")
+    return f"{source}: invalid protocol: " + "; ".join(parts)
+
+
+def _line_of(root, loc) -> int | None:
+    """The 1-based YAML line of a pydantic error location, following the composed node tree."""
+    node, line = root, None
+    for key in loc:
+        if isinstance(node, yaml.MappingNode):
+            child = next(((k, v) for k, v in node.value if k.value == str(key)), None)
+            if child is None:
+                break
+            node = child[1]
+            line = child[0].start_mark.line + 1
+        elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) and key < len(node.value):
+            node = node.value[key]
+            line = node.start_mark.line + 1
+        else:
+            break
+    if line is None and node is not None and node is not root:
+        line = node.start_mark.line + 1
+    return line
