@@ -1,0 +1,157 @@
+"""Design expansion of the two paper protocols: counts, balance, determinism (issue 2 acceptance)."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import pandas as pd
+import pytest
+
+from stimuli.design import build_design, shuffle_no_repeats, williams_orders
+from stimuli.protocol import load_protocol
+
+
+@pytest.fixture(scope="module")
+def exp1(tmp_path_factory):
+    from stimuli.cli import main
+
+    out = tmp_path_factory.mktemp("exp1")
+    assert main(["design", "protocols/exp1_shape_motion.yaml", "--participants", "16", "--seed", "1", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def exp2(tmp_path_factory):
+    from stimuli.cli import main
+
+    out = tmp_path_factory.mktemp("exp2")
+    assert main(["design", "protocols/exp2_com_vs_average.yaml", "--participants", "16", "--seed", "1", "--out", str(out)]) == 0
+    return out
+
+
+def no_back_to_back(trials: pd.DataFrame) -> bool:
+    for _, part in trials.groupby("participant"):
+        ids = part.sort_values("trial")["stimulus_id"].tolist()
+        if any(a == b for a, b in zip(ids, ids[1:])):
+            return False
+    return True
+
+
+def test_exp1_counts(exp1):
+    conditions = pd.read_csv(exp1 / "conditions.csv")
+    trials = pd.read_csv(exp1 / "trials.csv")
+    test_stimuli = conditions[conditions.kind == "test"]
+    assert len(test_stimuli) == 64 == test_stimuli.stimulus_id.nunique()
+    assert len(test_stimuli.groupby(["SEX", "GAIT", "BODY", "MOTION"])) == 64
+    assert list(trials.columns[:8]) == ["participant", "SEX", "block", "block_label", "trial", "stimulus_id",
+                                        "repetition", "practice"]
+    test = trials[trials.kind == "test"]
+    for participant, part in test.groupby("participant"):
+        assert len(part) == 64
+        counts = part.stimulus_id.value_counts()
+        assert len(counts) == 32 and set(counts) == {2}
+        sexes = conditions.set_index("stimulus_id").loc[part.stimulus_id, "SEX"]
+        assert sexes.nunique() == 1 and sexes.iloc[0] == part.SEX.iloc[0]  # sees one sex only
+        for _, block in part.groupby("block"):
+            assert len(block) == 32 and block.stimulus_id.nunique() == 16
+        trial_numbers = trials[trials.participant == participant].trial.tolist()
+        assert trial_numbers == list(range(1, len(trial_numbers) + 1))
+    assert trials.groupby("participant").SEX.first().value_counts().to_dict() == {"F": 8, "M": 8}
+    assert no_back_to_back(trials)
+
+
+def test_exp1_block_order_balanced(exp1):
+    trials = pd.read_csv(exp1 / "trials.csv")
+    first = trials[trials.block == 1].groupby("participant").block_label.first()
+    assert first.value_counts().to_dict() == {"GAIT=walk": 8, "GAIT=jog": 8}
+    sex = trials.groupby("participant").SEX.first()
+    assert pd.crosstab(sex, first).values.tolist() == [[4, 4], [4, 4]]  # balanced within each group too
+
+
+def test_exp1_practice_before_each_block(exp1):
+    trials = pd.read_csv(exp1 / "trials.csv")
+    for _, part in trials.groupby("participant"):
+        for _, block in part.groupby("block"):
+            kinds = block.sort_values("trial").kind.tolist()
+            assert kinds[:4] == ["practice"] * 4 and kinds[4:] == ["test"] * 32
+            practice_ids = block[block.kind == "practice"].stimulus_id
+            assert all(sid.startswith("practice-") for sid in practice_ids)
+
+
+def test_exp2_counts_and_left_right_balance(exp2):
+    conditions = pd.read_csv(exp2 / "conditions.csv")
+    trials = pd.read_csv(exp2 / "trials.csv")
+    test_stimuli = conditions[conditions.kind == "test"]
+    assert len(test_stimuli) == 32
+    assert {tuple(x) for x in test_stimuli[["left", "right"]].values} == {("NoCOM", "COM"), ("COM", "NoCOM")}
+    test = trials[trials.kind == "test"]
+    for _, part in test.groupby("participant"):
+        assert len(part) == 64
+        assert set(part.stimulus_id.value_counts()) == {2} and part.stimulus_id.nunique() == 32
+        for _, block in part.groupby("block"):
+            assert len(block) == 16 and block.stimulus_id.nunique() == 8
+        merged = part.merge(test_stimuli[["stimulus_id", "GAIT", "SEX", "BODY"]], on="stimulus_id")
+        per_cell = merged.groupby(["GAIT", "SEX", "BODY"]).left.value_counts().unstack()
+        assert (per_cell["NoCOM"] == per_cell["COM"]).all()
+    assert no_back_to_back(trials)
+    first_blocks = trials[trials.block == 1].groupby("participant").block_label.first().value_counts()
+    assert sorted(first_blocks) == [4, 4, 4, 4]  # each of the 4 blocks first for 4 participants
+
+
+def test_exp2_familiarization_and_practice(exp2):
+    trials = pd.read_csv(exp2 / "trials.csv")
+    design = load_protocol("protocols/exp2_com_vs_average.yaml")
+    bmi = {a.id: a.bmi for a in design.actors}
+    for _, block in trials[trials.participant == 3].groupby("block"):
+        block = block.sort_values("trial")
+        assert block.kind.tolist() == ["familiarization"] * 4 + ["practice"] * 4 + ["test"] * 16
+        fam = [sid.removeprefix("fam-") for sid in block[block.kind == "familiarization"].stimulus_id]
+        assert [bmi[a] for a in fam] == sorted(bmi[a] for a in fam)
+        sex = block.block_label.iloc[0].split("|")[0].split("=")[1]
+        assert all(a.startswith(sex + "_") for a in fam)
+
+
+def test_same_seed_same_bytes_other_seed_other_order(tmp_path, run_cli):
+    for name, seed in (("a", 7), ("b", 7), ("c", 8)):
+        assert run_cli("design", "protocols/exp2_com_vs_average.yaml", "--seed", seed, "--out", tmp_path / name)[0] == 0
+    for file in ("conditions.csv", "trials.csv", "design.json"):
+        assert (tmp_path / "a" / file).read_bytes() == (tmp_path / "b" / file).read_bytes()
+    assert (tmp_path / "a" / "trials.csv").read_bytes() != (tmp_path / "c" / "trials.csv").read_bytes()
+    assert (tmp_path / "a" / "conditions.csv").read_bytes() == (tmp_path / "c" / "conditions.csv").read_bytes()
+
+
+def test_thesis_protocols_balance_positions():
+    pointlight = build_design(load_protocol("protocols/thesis_pointlight.yaml"))
+    by_id = {s.stimulus_id: s for s in pointlight.stimuli}
+    assert len(pointlight.stimuli) == 60  # 10 parameter sets × 6 Latin-square arrangements
+    first_position = Counter((by_id[t.stimulus_id].levels["PARAMETER"], by_id[t.stimulus_id].arrangement[0])
+                             for t in pointlight.trials)
+    assert set(first_position.values()) == {10}  # each strength leftmost for 10 of 60 viewers, per video
+    assert all(sum(t.participant == p for t in pointlight.trials) == 10 for p in range(1, 61))
+    validation = build_design(load_protocol("protocols/thesis_validation.yaml"))
+    assert [s.arrangement for s in validation.stimuli] == [("lean_mocap", "keyframed", "modifier", "obese_mocap")]
+    assert len(validation.trials) == 96
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 6])
+def test_williams_square_balances_positions(k):
+    rows = williams_orders(k)
+    for position in range(k):
+        counts = Counter(row[position] for row in rows)
+        assert len(counts) == k and len(set(counts.values())) == 1
+    if k % 2 == 0 and k > 1:  # first-order carry-over balanced too
+        pairs = Counter((a, b) for row in rows for a, b in zip(row, row[1:]))
+        assert set(pairs.values()) == {1} and len(pairs) == k * (k - 1)
+
+
+def test_shuffle_no_repeats_when_possible_and_reports_impossible():
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        items = list(rng.choice(list("abcd"), size=int(rng.integers(1, 12))))
+        counts = Counter(items)
+        order = shuffle_no_repeats(items, rng)
+        assert Counter(order) == counts
+        if max(counts.values()) <= (len(items) + 1) // 2:
+            assert all(a != b for a, b in zip(order, order[1:]))

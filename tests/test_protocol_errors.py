@@ -1,0 +1,100 @@
+"""Malformed protocols: exit code 2, one paragraph naming the field (and line), nothing written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stimuli.errors import StimuliError
+from stimuli.protocol import load_protocol, parse_protocol
+
+EXP1 = (Path(__file__).resolve().parents[1] / "protocols" / "exp1_shape_motion.yaml").read_text()
+EXP2 = (Path(__file__).resolve().parents[1] / "protocols" / "exp2_com_vs_average.yaml").read_text()
+
+
+def edited(text: str, change) -> str:
+    data = yaml.safe_load(text)
+    change(data)
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def replace(text: str, old: str, new: str) -> str:
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+CASES = {
+    "misspelt top-level field": (replace(EXP1, "participants: 16", "partcipants: 16"), ["partcipants", "unknown field", "line 8"]),
+    "YAML syntax error": (replace(EXP1, "levels: [F, M]", "levels: [F, M"), ["YAML syntax error", "line"]),
+    "BMI out of human range": (replace(EXP1, "bmi: 28.1", "bmi: 281"), ["actors.0.bmi", "line 13", "less than or equal to 60"]),
+    "height out of human range": (replace(EXP1, "height_m: 1.64", "height_m: 16.4"), ["actors.1.height_m", "line 14"]),
+    "mis-typed number": (replace(EXP1, "repetitions: 2 ", "repetitions: twice "), ["repetitions", "valid integer", "'twice'"]),
+    "unbalanced between groups": (replace(EXP1, "participants: 16", "participants: 15"), ["participants", "cannot be balanced", "multiple of 2", "line 8"]),
+    "block factor not declared": (replace(EXP1, "by: [GAIT]", "by: [GAITS]"), ["blocks.by", "unknown factor 'GAITS'"]),
+    "level names no actor": (replace(EXP1, "{id: F_Lo2, label: Lo2,", "{id: F_Lo2, label: Lo9,"),
+                             ["factors.BODY", "'Lo2'", "names no actor", "sex F"]),
+    "gait level not declared": (replace(EXP1, "levels: [walk, jog]\n    maps_to: gait\n    abbreviations: {walk: W, jog: J}",
+                                        "levels: [walk, run]\n    maps_to: gait\n    abbreviations: {walk: W, run: R}"),
+                                ["factors.GAIT", "['run']", "gaits"]),
+    "practice uses a test level": (replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: [P1, Hi1], MOTION: [P1, P2]}"),
+                                   ["practice.levels.BODY", "['Hi1']", "test levels"]),
+    "unknown role": (replace(EXP1, "role: between", "role: sometimes"), ["factors.0.role", "'between'", "'within'"]),
+    "required field missing": (edited(EXP1, lambda d: d.pop("response")), ["response", "required field is missing"]),
+    "duplicate actor ids": (edited(EXP1, lambda d: d["actors"].append(dict(d["actors"][0]))), ["actors", "ids repeat", "F_Hi1"]),
+    "likert without labels": (edited(EXP1, lambda d: d["response"].update(labels=[])), ["response", "at least 2 labels"]),
+    "forced choice without alternatives": (edited(EXP1, lambda d: d["response"].update(type="afc")), ["response.type", "alternatives"]),
+    "three alternatives side by side": (edited(EXP2, lambda d: d["factors"][3].update(levels=["NoCOM", "COM", "X"])),
+                                        ["display.layout", "side_by_side shows 2 clips"]),
+    "repeated levels": (replace(EXP1, "levels: [F, M]", "levels: [F, F]"), ["factors.0", "levels of SEX repeat"]),
+    "abbreviation for an unknown level": (replace(EXP1, "{walk: W, jog: J}", "{walk: W, run: R}"), ["factors.1", "['run']", "not levels of GAIT"]),
+    "not a mapping": ("- just\n- a list\n", ["must be a YAML mapping"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_malformed_protocol_exit_2_names_field(case, tmp_path, run_cli):
+    text, expected = CASES[case]
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    code, stdout, stderr = run_cli("design", path, "--out", out)
+    assert code == 2
+    assert "Traceback" not in stderr and stderr.startswith("shapemotion: error:")
+    message = " ".join(stderr.split())
+    assert str(path) in message
+    for fragment in expected:
+        assert fragment in message, (fragment, message)
+    assert not out.exists()  # nothing written
+
+
+def test_missing_file_and_api_exception(tmp_path, run_cli):
+    code, _, stderr = run_cli("validate", tmp_path / "nope.yaml")
+    assert code == 2 and "not found" in stderr
+    with pytest.raises(StimuliError, match="participants"):
+        parse_protocol(replace(EXP1, "participants: 16", "participants: 15"))
+
+
+def test_cli_participants_override_must_balance(tmp_path, run_cli):
+    code, _, stderr = run_cli("design", "protocols/exp1_shape_motion.yaml", "--participants", "9", "--out", tmp_path / "o")
+    assert code == 2 and "--participants" in stderr and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("name", ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"])
+def test_bundled_protocols_valid(name, protocol_path, run_cli):
+    assert load_protocol(protocol_path(name)).name == name
+    code, out, _ = run_cli("validate", protocol_path(name))
+    assert code == 0 and "valid protocol" in out
+
+
+def test_exp1_protocol_matches_table2():
+    p = load_protocol("protocols/exp1_shape_motion.yaml")
+    table2 = {("F", "Hi1"): (1.60, 28.1), ("F", "Hi2"): (1.64, 25.3), ("F", "Lo1"): (1.60, 24.8), ("F", "Lo2"): (1.60, 19.5),
+              ("M", "Hi1"): (1.79, 32.1), ("M", "Hi2"): (1.83, 35.8), ("M", "Lo1"): (1.81, 22.7), ("M", "Lo2"): (1.82, 21.7)}
+    for (sex, label), (height, bmi) in table2.items():
+        actor = p.actor(sex, label)
+        assert (actor.height_m, actor.bmi) == (height, bmi)
+    assert [(f.name, f.role) for f in p.factors] == [("SEX", "between"), ("GAIT", "within"), ("BODY", "within"), ("MOTION", "within")]
+    assert p.participants == 16 and p.repetitions == 2 and p.clip.duration_s == 4
+    assert p.response.labels[0] == "Very Inconsistent" and p.response.labels[-1] == "Very Consistent"
