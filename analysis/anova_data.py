@@ -1,0 +1,162 @@
+"""Long-format data → the subjects × cells matrix of cell means that the ANOVA engine analyses.
+
+All checks of the input live here, each raising ``AnalysisError`` with a message that names the column,
+subject, cell or rows at fault. Uses integer codes and ``np.bincount`` rather than pandas group-bys so
+that one Experiment-1-sized analysis stays in the low milliseconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from analysis.anova_core import Design
+from analysis.errors import AnalysisError
+
+
+@dataclass(frozen=True)
+class PreparedData:
+    design: Design
+    Y: np.ndarray  # subjects × cells, mean of the rows of each subject × cell
+    counts: np.ndarray  # subjects × cells, number of rows averaged
+    subjects: tuple[str, ...]  # subject labels, in row order of Y
+
+
+def _rows(idx, limit: int = 5) -> str:
+    idx = list(idx)
+    shown = ", ".join(str(i) for i in idx[:limit])
+    return shown + (f" … ({len(idx)} rows)" if len(idx) > limit else "")
+
+
+def _sort_key(values: np.ndarray) -> np.ndarray:
+    try:
+        return np.argsort(values.astype(float), kind="stable")
+    except (TypeError, ValueError):
+        return np.argsort(values.astype(str), kind="stable")
+
+
+def factor_codes(col: pd.Series) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Integer codes and level labels of a factor column. Level order: the categories' order for a
+    pandas Categorical, otherwise sorted (numerically when all levels are numbers)."""
+    if isinstance(col.dtype, pd.CategoricalDtype):
+        cats = col.cat.categories
+        codes = col.cat.codes.to_numpy()
+        used = np.unique(codes)
+        remap = np.full(len(cats), -1)
+        remap[used] = np.arange(len(used))
+        return remap[codes], tuple(str(c) for c in cats[used])
+    codes, uniques = pd.factorize(col, sort=False)
+    uniques = np.asarray(uniques, dtype=object)
+    order = _sort_key(uniques)
+    rank = np.empty(len(order), dtype=int)
+    rank[order] = np.arange(len(order))
+    return rank[codes], tuple(str(u) for u in uniques[order])
+
+
+def prepare(
+    data: pd.DataFrame,
+    dv: str,
+    subject: str,
+    within: list[str] | tuple[str, ...] = (),
+    between: list[str] | tuple[str, ...] = (),
+) -> PreparedData:
+    """Validate long-format data and reduce it to one mean per subject × within cell."""
+    if not isinstance(data, pd.DataFrame):
+        raise AnalysisError(f"expected a pandas DataFrame, got {type(data).__name__}")
+    within, between = tuple(within or ()), tuple(between or ())
+    factors = within + between
+    if not factors:
+        raise AnalysisError("no factors given: name at least one within (--within) or between (--between) factor")
+    names = (dv, subject) + factors
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise AnalysisError(f"column(s) {', '.join(map(repr, dup))} named in more than one role (dv, subject, within, between)")
+    missing = [n for n in names if n not in data.columns]
+    if missing:
+        raise AnalysisError(
+            f"column(s) {', '.join(map(repr, missing))} not in the data; columns are: {', '.join(map(str, data.columns))}"
+        )
+    if len(data) == 0:
+        raise AnalysisError("the data has no rows")
+    for n in names:
+        na = data[n].isna().to_numpy()
+        if na.any():
+            raise AnalysisError(
+                f"column {n!r} has {int(na.sum())} missing value(s) (NaN/empty) at row index {_rows(data.index[na])}; "
+                "drop or fill them before the ANOVA"
+            )
+    raw = data[dv]
+    if raw.dtype == bool:
+        raw = raw.astype(float)
+    y = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(y)
+    if bad.any():
+        vals = ", ".join(repr(v) for v in pd.unique(raw[bad])[:3])
+        raise AnalysisError(
+            f"dependent variable {dv!r} must be numeric: {int(bad.sum())} value(s) are not finite numbers "
+            f"(e.g. {vals}) at row index {_rows(data.index[bad])}"
+        )
+    if np.ptp(y) == 0:
+        raise AnalysisError(f"dependent variable {dv!r} is constant (every value is {y[0]:g}): there is no variance to analyse")
+
+    codes, levels = {}, {}
+    for f in factors:
+        codes[f], levels[f] = factor_codes(data[f])
+        if len(levels[f]) < 2:
+            raise AnalysisError(f"factor {f!r} has only one level ({levels[f][0]!r}); a factor needs at least two levels")
+    scode, subjects = factor_codes(data[subject])
+    n = len(subjects)
+
+    # between: each subject in exactly one group
+    bshape = tuple(len(levels[f]) for f in between)
+    if between:
+        bcode = np.ravel_multi_index(tuple(codes[f] for f in between), bshape)
+        lo = np.full(n, np.iinfo(np.int64).max)
+        hi = np.full(n, -1)
+        np.minimum.at(lo, scode, bcode)
+        np.maximum.at(hi, scode, bcode)
+        two = np.flatnonzero(lo != hi)
+        if len(two):
+            s = two[0]
+
+            def lab(c):
+                return ", ".join(f"{f}={levels[f][i]}" for f, i in zip(between, np.unravel_index(c, bshape)))
+
+            raise AnalysisError(
+                f"subject {subjects[s]!r} appears in two between-subjects groups ({lab(lo[s])} and {lab(hi[s])})"
+                + (f"; {len(two)} subjects are affected" if len(two) > 1 else "")
+                + "; a between factor must be constant within a subject"
+            )
+        groups = np.stack(np.unravel_index(lo, bshape), axis=1).astype(int)
+    else:
+        groups = np.zeros((n, 0), dtype=int)
+
+    # within: cell means and counts
+    wshape = tuple(len(levels[f]) for f in within)
+    K = int(np.prod(wshape)) if within else 1
+    wcode = np.ravel_multi_index(tuple(codes[f] for f in within), wshape) if within else np.zeros(len(y), dtype=int)
+    flat = scode * K + wcode
+    counts = np.bincount(flat, minlength=n * K).reshape(n, K)
+    sums = np.bincount(flat, weights=y, minlength=n * K).reshape(n, K)
+    if (counts == 0).any():
+        subj_missing = np.flatnonzero((counts == 0).any(axis=1))
+        s = subj_missing[0]
+        cells = np.flatnonzero(counts[s] == 0)
+
+        def cell(c):
+            return ", ".join(f"{f}={levels[f][i]}" for f, i in zip(within, np.unravel_index(c, wshape)))
+
+        more = f" and {len(cells) - 1} more cell(s)" if len(cells) > 1 else ""
+        others = f"; {len(subj_missing)} subjects have missing cells" if len(subj_missing) > 1 else ""
+        raise AnalysisError(
+            f"subject {subjects[s]!r} has no data for cell {cell(cells[0])}{more}{others}; "
+            "a repeated-measures ANOVA needs every subject in every within cell"
+        )
+    design = Design(
+        within={f: levels[f] for f in within},
+        between={f: levels[f] for f in between},
+        groups=groups,
+    )
+    return PreparedData(design=design, Y=sums / counts, counts=counts, subjects=subjects)
