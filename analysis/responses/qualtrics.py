@@ -1,0 +1,151 @@
+"""Qualtrics CSV exports (current 3-header-row form and the legacy 2-row form) → answers + row exclusions.
+
+One data row is one respondent. Columns are classified as metadata (StartDate … UserLanguage),
+display-order ``*_DO`` columns (they give each participant's presentation order), timing columns,
+questions (their export tag names a stimulus, optionally with a repetition suffix; rank-order questions
+add ``_1`` … ``_k`` per screen position) and embedded data (anything else, e.g. ``PROLIFIC_PID``).
+A question whose tag names no stimulus is listed as a column exclusion.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from analysis.responses.answers import Answer, Exclusion, TagIndex
+from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_column
+
+TIMING = re.compile(r"_(First Click|Last Click|Page Submit|Click Count)$", re.IGNORECASE)
+RANK_POSITION = re.compile(r"^(?P<base>.+)_(?P<pos>\d+)$")
+UNFINISHED = {"0", "false", "no"}
+NOT_REAL = {"1", "survey preview", "4", "survey test", "8", "spam", "16", "offline"}
+
+
+@dataclass
+class QualtricsColumns:
+    """Which column is what, with the stimulus a question column answers."""
+
+    questions: dict[int, tuple[str, int | None, int | None]] = field(default_factory=dict)  # i → (sid, rep, pos)
+    display_order: list[int] = field(default_factory=list)
+    metadata: list[int] = field(default_factory=list)
+    embedded: list[int] = field(default_factory=list)
+    timing: list[int] = field(default_factory=list)
+    unknown: list[int] = field(default_factory=list)
+
+
+def classify_columns(raw: RawFile, tags: TagIndex | None, ranking: bool = False) -> QualtricsColumns:
+    """Sort the export's columns; ``tags`` None only classifies (for ``responses inspect``)."""
+    out = QualtricsColumns()
+    for i, name in enumerate(raw.columns):
+        import_id = str(raw.import_ids[i].get("ImportId", "")) if i < len(raw.import_ids) else ""
+        if name in QUALTRICS_METADATA or (import_id and import_id[0].islower() and import_id != name):
+            out.metadata.append(i)
+        elif name.endswith("_DO"):
+            out.display_order.append(i)
+        elif TIMING.search(name):
+            out.timing.append(i)
+        elif tags is not None and (hit := _match(name, tags, ranking)):
+            out.questions[i] = hit
+        elif import_id.startswith("QID") or (raw.format == "qualtrics-legacy" and re.match(r"^Q\d", name)):
+            out.unknown.append(i)
+        else:
+            out.embedded.append(i)
+    return out
+
+
+def _match(name: str, tags: TagIndex, ranking: bool) -> tuple[str, int | None, int | None] | None:
+    if ranking:
+        m = RANK_POSITION.match(name)
+        hit = tags.match(m["base"]) if m else None
+        return (hit[0], hit[1], int(m["pos"])) if hit else None
+    hit = tags.match(name)
+    return (hit[0], hit[1], None) if hit else None
+
+
+def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking: bool = False):
+    """Answers and row exclusions of a Qualtrics export (one row per respondent)."""
+    cols = classify_columns(raw, tags, ranking)
+    exclusions = [Exclusion(None, "", "unknown export tag",
+                            f"question {raw.columns[i]!r} ({_text(raw, i)}) names no stimulus of the design; "
+                            f"column not imported", raw.columns[i]) for i in cols.unknown]
+    pid_col = _id_column(raw)
+    finished = _find(raw.columns, "Finished")
+    status = _find(raw.columns, "Status")
+    group_cols = {name: _find(raw.columns, name) for name in between}
+    seen: dict[str, int] = {}
+    answers: list[Answer] = []
+    for row, record in zip(raw.row_numbers, raw.rows):
+        pid = record[pid_col].strip() if pid_col is not None and pid_col < len(record) else ""
+        pid = pid or f"row{row}"
+        reason = _row_problem(raw, record, finished, status)
+        if reason is None and pid in seen:
+            reason = ("duplicate participant id", f"{pid!r} already imported from row {seen[pid]}")
+        if reason:
+            exclusions.append(Exclusion(row, pid, *reason))
+            continue
+        seen[pid] = row
+        groups = {n: record[i].strip() for n, i in group_cols.items() if i is not None and record[i].strip()}
+        answers += _row_answers(raw, record, row, pid, cols, groups)
+    return answers, exclusions
+
+
+def _row_problem(raw: RawFile, record: list[str], finished: int | None, status: int | None):
+    if len(record) != len(raw.columns):
+        return "malformed row", f"{len(record)} fields, the header has {len(raw.columns)} (corrupted export?)"
+    if status is not None and record[status].strip().lower() in NOT_REAL:
+        return "survey preview or test", f"Status = {record[status]!r}"
+    if finished is not None and record[finished].strip().lower() in UNFINISHED:
+        progress = _find(raw.columns, "Progress")
+        extra = f", Progress = {record[progress]}%" if progress is not None else ""
+        return "unfinished", f"Finished = {record[finished]}{extra}"
+    return None
+
+
+def _row_answers(raw, record, row, pid, cols: QualtricsColumns, groups) -> list[Answer]:
+    order = _display_order(raw, record, cols)
+    answers: dict[tuple[str, int | None], Answer] = {}
+    for i, (sid, rep, pos) in cols.questions.items():
+        value = record[i].strip()
+        if not value:
+            continue
+        trial = order.get(raw.columns[i].lower()) or order.get(str(raw.import_ids[i].get("ImportId", "")).lower())
+        if pos is None:
+            answers[(raw.columns[i], None)] = Answer(row, pid, sid, value, raw.columns[i], rep, trial, groups=groups)
+            continue
+        base = raw.columns[i].rsplit("_", 1)[0]
+        answer = answers.setdefault((base, rep), Answer(row, pid, sid, "", base, rep, trial, ranks=[], groups=groups))
+        answer.ranks.extend([""] * (pos - len(answer.ranks)))
+        answer.ranks[pos - 1] = value
+    return list(answers.values())
+
+
+def _display_order(raw: RawFile, record: list[str], cols: QualtricsColumns) -> dict[str, int]:
+    """Tag (or QID) → 1-based position in the participant's presentation order, from the ``*_DO`` columns.
+
+    Block-level ``FL_*_DO`` columns list blocks; question-level ``<block>_DO`` columns list questions.
+    Blocks are taken in the order the flow shows them, so trial numbers run across blocks.
+    """
+    lists = {raw.columns[i][:-3]: [x.strip() for x in record[i].split("|") if x.strip()]
+             for i in cols.display_order if i < len(record)}
+    flow = [name for key, items in lists.items() if key.startswith("FL_") for name in items]
+    blocks = [b for b in flow if b in lists] + [b for b in lists if b not in flow and not b.startswith("FL_")]
+    order: dict[str, int] = {}
+    for block in blocks:
+        for item in lists[block]:
+            order.setdefault(item.lower(), len(order) + 1)
+    return order
+
+
+def _id_column(raw: RawFile) -> int | None:
+    name = _participant_column(raw.columns) or next((c for c in ("ResponseId", "ResponseID") if c in raw.columns),
+                                                    None)
+    return raw.columns.index(name) if name else None
+
+
+def _find(columns: list[str], name: str) -> int | None:
+    return columns.index(name) if name in columns else None
+
+
+def _text(raw: RawFile, i: int) -> str:
+    text = raw.question_text[i] if i < len(raw.question_text) else ""
+    return repr(text[:60]) if text else "no question text"

@@ -1,0 +1,166 @@
+"""Read a response file and tell which kind it is: Qualtrics (3-row or legacy 2-row), jsPsych CSV/JSON, long CSV.
+
+Reading never guesses silently: a file that is binary, not UTF-8, empty or without a recognisable header
+raises :class:`~analysis.errors.AnalysisError` naming the file and what was expected.
+
+>>> import tempfile, pathlib
+>>> p = pathlib.Path(tempfile.mkdtemp()) / "long.csv"
+>>> _ = p.write_text("participant,stimulus_id,response\\n1,s1,3\\n")
+>>> read_response_file(p).format
+'long'
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from analysis.errors import AnalysisError
+
+# Columns Qualtrics writes before the questions (current names and the legacy V1…V10 names).
+QUALTRICS_METADATA = {
+    "StartDate", "EndDate", "Status", "IPAddress", "Progress", "Duration (in seconds)", "Finished",
+    "RecordedDate", "ResponseId", "RecipientLastName", "RecipientFirstName", "RecipientEmail",
+    "ExternalReference", "LocationLatitude", "LocationLongitude", "DistributionChannel", "UserLanguage",
+    "ResponseID", "ResponseSet", "Name", "ExternalDataReference", "EmailAddress", "Q_TotalDuration",
+    "Q_RecaptchaScore", "Q_RelevantIDDuplicate", "Q_RelevantIDDuplicateScore", "Q_RelevantIDFraudScore",
+    "Q_RelevantIDLastStartDate", "Q_BallotBoxStuffing",
+}
+JSPSYCH_MARKERS = {"trial_type", "trial_index", "internal_node_id", "time_elapsed"}
+PARTICIPANT_COLUMNS = ["participant", "participant_id", "PROLIFIC_PID", "workerId", "subject", "subject_id",
+                       "run_id"]
+
+
+@dataclass
+class RawFile:
+    """A response file split into its header and data records (lists of strings, or dicts for JSON).
+
+    ``rows[i]`` carries its 1-based record number in the file (``row_numbers[i]``) so that every
+    exclusion can name the row a spreadsheet shows.
+    """
+
+    path: Path
+    format: str                   # qualtrics | qualtrics-legacy | jspsych-csv | jspsych-json | long
+    columns: list[str]
+    question_text: list[str] = field(default_factory=list)
+    import_ids: list[dict] = field(default_factory=list)
+    rows: list[list[str]] | list[dict] = field(default_factory=list)
+    row_numbers: list[int] = field(default_factory=list)
+
+    @property
+    def n_rows(self) -> int:
+        return len(self.rows)
+
+
+def read_response_file(path: str | Path) -> RawFile:
+    """Detect the format of ``path`` and split it into header and records."""
+    path = Path(path)
+    text = _decode(path)
+    stripped = text.lstrip()
+    if not stripped:
+        raise AnalysisError(f"{path}: the file is empty (expected a response export with a header row)")
+    if stripped[0] in "[{":
+        return _read_json(path, stripped)
+    return _read_csv(path, text)
+
+
+def _decode(path: Path) -> str:
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise AnalysisError(f"{path}: response file not found") from None
+    except IsADirectoryError:
+        raise AnalysisError(f"{path}: is a directory; expected one response file") from None
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise AnalysisError(f"{path}: the file is UTF-16 (Qualtrics' TSV export?); export the responses as CSV "
+                            f"(UTF-8) instead")
+    if data[:4] == b"PK\x03\x04" or b"\x00" in data[:4096]:
+        raise AnalysisError(f"{path}: not a text file (a ZIP/XLSX or binary file?); expected a CSV or JSON export")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise AnalysisError(f"{path}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
+                            f"re-export the responses as UTF-8 CSV") from None
+
+
+def _read_json(path: Path, text: str) -> RawFile:
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise AnalysisError(f"{path}: line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    if isinstance(data, dict):  # jsPsych's {"trials": [...]} or a single trial object
+        data = data.get("trials", [data])
+    if not isinstance(data, list) or not all(isinstance(x, dict) for x in data):
+        raise AnalysisError(f"{path}: expected jsPsych JSON data: a list of trial objects")
+    columns = list(dict.fromkeys(k for trial in data for k in trial))
+    return RawFile(path, "jspsych-json", columns, rows=data, row_numbers=list(range(1, len(data) + 1)))
+
+
+def _read_csv(path: Path, text: str) -> RawFile:
+    try:
+        records = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise AnalysisError(f"{path}: not a readable CSV file ({exc})") from None
+    header = [c.strip() for c in records[0]]
+    names = set(header)
+    if _is_qualtrics(header):
+        return _qualtrics(path, header, records)
+    data = records[1:]
+    numbers = list(range(2, len(records) + 1))
+    if names & JSPSYCH_MARKERS and ("response" in names or "button_pressed" in names):
+        return RawFile(path, "jspsych-csv", header, rows=data, row_numbers=numbers)
+    if {"stimulus_id", "response"} <= names and _participant_column(header):
+        return RawFile(path, "long", header, rows=data, row_numbers=numbers)
+    raise AnalysisError(
+        f"{path}: no recognisable header row; expected a Qualtrics export (ResponseId, Finished, … then the "
+        f"questions' export tags), jsPsych data (trial_type, response, stimulus_id, …) or a long CSV with "
+        f"columns participant, stimulus_id, response; the first row is {header[:6]}")
+
+
+def _is_qualtrics(header: list[str]) -> bool:
+    names = set(header)
+    current = bool({"ResponseId", "ResponseID"} & names) or {"StartDate", "Finished"} <= names
+    legacy = len(header) > 1 and header[0] == "V1" and header[1] == "V2"
+    return current or legacy
+
+
+def _qualtrics(path: Path, header: list[str], records: list[list[str]]) -> RawFile:
+    if len(records) < 2:
+        raise AnalysisError(f"{path}: a Qualtrics export needs at least its 2 header rows; found 1")
+    second = records[1] + [""] * (len(header) - len(records[1]))
+    third = records[2] if len(records) > 2 else []
+    is_current = bool(third) and all(c.strip().startswith("{") for c in third if c.strip()) and any(third)
+    if is_current:
+        import_ids = [_import_id(path, c) for c in third] + [{}] * (len(header) - len(third))
+        start, fmt = 3, "qualtrics"
+    else:
+        import_ids, start, fmt = [{} for _ in header], 2, "qualtrics-legacy"
+    # Legacy exports name their metadata V1…V10 in row 1 and the real names in row 2.
+    columns = [second[i].strip() if _is_v_name(h) and second[i].strip() else h for i, h in enumerate(header)]
+    return RawFile(path, fmt, columns, question_text=[c.strip() for c in second[:len(header)]], import_ids=import_ids,
+                   rows=records[start:], row_numbers=list(range(start + 1, len(records) + 1)))
+
+
+def _is_v_name(name: str) -> bool:
+    return len(name) > 1 and name[0] == "V" and name[1:].isdigit()
+
+
+def _import_id(path: Path, cell: str) -> dict:
+    if not cell.strip():
+        return {}
+    try:
+        value = json.loads(cell)
+    except json.JSONDecodeError:
+        raise AnalysisError(f"{path}: row 3: {cell!r} is not the ImportId JSON Qualtrics writes "
+                            f"(e.g. {{\"ImportId\":\"QID1\"}})") from None
+    return value if isinstance(value, dict) else {}
+
+
+def _participant_column(columns: list[str]) -> str | None:
+    """The first column that names participants (``participant``, ``PROLIFIC_PID``, …)."""
+    lower = {c.lower(): c for c in columns}
+    return next((lower[c.lower()] for c in PARTICIPANT_COLUMNS if c.lower() in lower), None)

@@ -1,0 +1,176 @@
+"""Score answers, apply the exclusion rules, and build the tidy long table.
+
+Rules, in order (each excluded row is listed once, with the first reason that applies):
+1. the reader's own (malformed row, unfinished, preview/test, not a stimulus trial, duplicate participant id);
+2. answers to stimuli the design does not know (long formats: that row);
+3. duplicate answers (same participant, stimulus and repetition);
+4. answers outside the response scale (the whole row: in a Qualtrics export that is the participant);
+5. participants whose answers span several between-subject groups;
+6. participants with missing cells (a design cell without any valid answer): all their rows.
+Rows with no answer at all are listed as "no answers". ``imported rows + excluded rows = rows in the file``.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+
+import pandas as pd
+
+from analysis.io_design import DesignInfo
+from analysis.responses.answers import Answer, Exclusion
+from analysis.responses.scoring import OutsideScale, score_choice, score_likert, score_ranking
+
+EXCLUSION_COLUMNS = ["row", "participant", "reason", "detail", "column"]
+
+
+def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int], design: DesignInfo,
+             trialwise: bool) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(tidy table, exclusions table) from a reader's answers and exclusions."""
+    excluded: dict[int, Exclusion] = {e.row: e for e in exclusions if e.row is not None}
+    column_notes = [e for e in exclusions if e.row is None]
+    stimuli = design.stimulus_table()
+
+    def drop(answer: Answer, reason: str, detail: str) -> None:
+        excluded.setdefault(answer.row, Exclusion(answer.row, answer.participant, reason, detail, answer.column))
+
+    kept = []
+    for a in answers:
+        if a.stimulus_id not in stimuli.index:
+            drop(a, "unknown stimulus", f"stimulus_id {a.stimulus_id!r} is not in conditions.csv")
+        else:
+            kept.append(a)
+    kept = _number_repetitions(kept, trialwise)
+    kept = _drop_duplicates(kept, drop)
+    scored = []
+    for a in kept:
+        try:
+            scored.append((a, _score(a, design)))
+        except OutsideScale as exc:
+            drop(a, "answer outside the scale", str(exc))
+    scored = [(a, s) for a, s in scored if a.row not in excluded]
+    scored = _check_groups(scored, design, stimuli, drop)
+    scored = [(a, s) for a, s in scored if a.row not in excluded]
+    scored = _check_cells(scored, design, stimuli, drop)
+    scored = [(a, s) for a, s in scored if a.row not in excluded]
+    imported = {a.row for a, _ in scored}
+    for row in rows:
+        if row not in imported and row not in excluded:
+            excluded[row] = Exclusion(row, "", "no answers", "the row answers no stimulus of the design")
+    table = _table(scored, design, stimuli, trialwise)
+    listed = sorted(excluded.values(), key=lambda e: e.row) + column_notes
+    frame = pd.DataFrame([[e.row, e.participant, e.reason, e.detail, e.column] for e in listed],
+                         columns=EXCLUSION_COLUMNS).astype({"row": "Int64"})
+    return table, frame
+
+
+def _number_repetitions(answers: list[Answer], trialwise: bool) -> list[Answer]:
+    """Repetitions the file does not state are numbered by presentation (or row) order."""
+    counter: Counter = Counter()
+    for a in sorted(answers, key=lambda a: (a.participant, a.trial if a.trial is not None else 0, a.row)):
+        if a.repetition is None:
+            counter[(a.participant, a.stimulus_id)] += 1
+            a.repetition = counter[(a.participant, a.stimulus_id)]
+    if trialwise:  # presentation order within a participant = row order when no trial number is given
+        order: Counter = Counter()
+        for a in sorted(answers, key=lambda a: a.row):
+            order[a.participant] += 1
+            a.trial = a.trial if a.trial is not None else order[a.participant]
+    return answers
+
+
+def _drop_duplicates(answers: list[Answer], drop) -> list[Answer]:
+    first: dict[tuple, int] = {}
+    out = []
+    for a in sorted(answers, key=lambda a: a.row):
+        key = (a.participant, a.stimulus_id, a.repetition)
+        if key in first and first[key] != a.row:
+            drop(a, "duplicate answer", f"participant {a.participant!r} already answered {a.stimulus_id} "
+                                        f"repetition {a.repetition} in row {first[key]}")
+            continue
+        first.setdefault(key, a.row)
+        out.append(a)
+    return out
+
+
+def _score(a: Answer, design: DesignInfo) -> dict:
+    if design.response_type == "likert":
+        return {"rating": score_likert(a.value, design.labels, design.k)}
+    arrangement = design.arrangement(a.stimulus_id)
+    if design.response_type == "afc":
+        chosen, position = score_choice(a.value, arrangement, design.position_labels)
+        return {"chosen": chosen, "position": position}
+    return {"ranking": ">".join(score_ranking(a.ranks, a.value, arrangement, design.position_labels))}
+
+
+def _check_groups(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
+    """Every participant belongs to one between-subject group (from the stimuli answered and the file)."""
+    if not design.between:
+        return scored
+    groups = defaultdict(set)
+    for a, _ in scored:
+        row = stimuli.loc[a.stimulus_id]
+        groups[a.participant].add(tuple(str(row.get(b, "")) for b in design.between))
+        if a.groups:
+            groups[a.participant].add(tuple(a.groups.get(b, str(row.get(b, ""))) for b in design.between))
+    for a, _ in scored:
+        if len(groups[a.participant]) > 1:
+            found = sorted("/".join(g) for g in groups[a.participant])
+            drop(a, "several between-subject groups",
+                 f"{'×'.join(design.between)} levels {found} in one participant's answers")
+    return scored
+
+
+def _cell_key(row: pd.Series, factors: list[str]) -> tuple:
+    return tuple(str(row[f]) for f in factors)
+
+
+def _check_cells(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
+    """A participant must have at least one valid answer in each design cell of their group."""
+    tests = design.test_conditions
+    cells_of_group = defaultdict(set)
+    for _, row in tests.iterrows():
+        cells_of_group[_cell_key(row, design.between)].add(_cell_key(row, design.cell_factors))
+    seen = defaultdict(set)
+    group_of = {}
+    for a, _ in scored:
+        row = stimuli.loc[a.stimulus_id]
+        if row["practice"]:
+            continue
+        group_of[a.participant] = _cell_key(row, design.between)
+        seen[a.participant].add(_cell_key(row, design.cell_factors))
+    for a, _ in scored:
+        expected = cells_of_group.get(group_of.get(a.participant), set())
+        missing = sorted(expected - seen[a.participant]) if a.participant in group_of else ["(all)"]
+        if missing:
+            example = ", ".join(f"{f}={v}" for f, v in zip(design.cell_factors, missing[0])) if expected else "all"
+            drop(a, "missing cells", f"{len(missing)} of {len(expected) or '?'} design cells have no valid answer "
+                                     f"(e.g. {example})")
+    return scored
+
+
+def _table(scored, design: DesignInfo, stimuli: pd.DataFrame, trialwise: bool) -> pd.DataFrame:
+    factor_cols = [f.name for f in design.factors if f.role != "alternatives"]
+    records = []
+    for a, score in scored:
+        row = stimuli.loc[a.stimulus_id]
+        records.append({"participant": a.participant, **{f: str(row.get(f, "")) for f in factor_cols},
+                        "stimulus_id": a.stimulus_id, "repetition": a.repetition, "trial": a.trial, **score,
+                        "rt": a.rt, "practice": bool(row["practice"]), "row": a.row})
+    score_cols = {"likert": ["rating"], "afc": ["chosen", "position"], "ranking": ["ranking"]}[design.response_type]
+    columns = ["participant", *factor_cols, "stimulus_id", "repetition", "trial", *score_cols, "rt", "practice", "row"]
+    table = pd.DataFrame.from_records(records, columns=columns)
+    table = table.astype({"repetition": "Int64", "trial": "Int64", "row": "Int64"})
+    if design.response_type in ("likert",):
+        table["rating"] = table["rating"].astype("Int64")
+    if design.response_type == "afc":
+        table["position"] = table["position"].astype("Int64")
+    table["_order"] = participant_order(table["participant"])
+    table = table.sort_values(["_order", "practice", "trial", "row", "stimulus_id", "repetition"], kind="stable")
+    return table.drop(columns="_order").reset_index(drop=True)
+
+
+def participant_order(participants: pd.Series) -> pd.Series:
+    """Sort key: numeric ids as numbers (2 before 10), then the others alphabetically."""
+    ids = sorted(set(participants), key=lambda x: (0, int(x), "") if str(x).isdigit() else (1, 0, str(x)))
+    rank = {p: i for i, p in enumerate(ids)}
+    return participants.map(rank)

@@ -1,0 +1,89 @@
+"""One-row-per-answer formats → answers: jsPsych data (CSV or JSON) and the plain long CSV.
+
+jsPsych rows are trials of any plugin; those with a ``stimulus_id`` (the survey exporter adds it to each
+video trial's ``data``) are answers, every other row (instructions, consent, fullscreen, …) is listed as
+excluded with reason "not a stimulus trial" so that counts reconcile with the file. Button responses
+are 0-based in jsPsych and become 1-based here; ``rt`` is in milliseconds in jsPsych and seconds in the
+tidy table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+from analysis.responses.answers import Answer, Exclusion
+from analysis.responses.read import RawFile, _participant_column
+
+
+def trialwise_answers(raw: RawFile, between: list[str]):
+    """Answers and row exclusions of a jsPsych or long file (one row per answer)."""
+    rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
+    pid_col = _participant_column(raw.columns)
+    jspsych = raw.format.startswith("jspsych")
+    answers, exclusions = [], []
+    for number, record, cells in zip(raw.row_numbers, rows, raw.rows):
+        pid = _text(record.get(pid_col)) if pid_col else raw.path.stem
+        if raw.format != "jspsych-json" and len(cells) != len(raw.columns):
+            exclusions.append(Exclusion(number, pid, "malformed row",
+                                        f"{len(cells)} fields, the header has {len(raw.columns)}"))
+            continue
+        sid = _text(record.get("stimulus_id"))
+        if not sid:
+            kind = _text(record.get("trial_type")) or "?"
+            exclusions.append(Exclusion(number, pid, "not a stimulus trial", f"trial_type = {kind}"))
+            continue
+        if not pid:
+            exclusions.append(Exclusion(number, pid, "no participant id", f"column {pid_col!r} is empty"))
+            continue
+        answers.append(_answer(record, number, pid, sid, jspsych, between))
+    return answers, exclusions
+
+
+def _answer(record: dict, number: int, pid: str, sid: str, jspsych: bool, between: list[str]) -> Answer:
+    value, ranks = _response(record.get("response", record.get("button_pressed")), jspsych)
+    rt = _number(record.get("rt"))
+    if rt is not None and jspsych:
+        rt = rt / 1000.0
+    elif rt is None and _number(record.get("rt_ms")) is not None:
+        rt = _number(record.get("rt_ms")) / 1000.0
+    rep = _number(record.get("repetition"))
+    trial = _number(record.get("trial"))  # jsPsych's trial_index counts every row; order is re-derived later
+    groups = {n: _text(record.get(n)) for n in between if _text(record.get(n))}
+    return Answer(number, pid, sid, value, "response", int(rep) if rep is not None else None,
+                  int(trial) if trial is not None else None, rt, ranks, groups)
+
+
+def _response(raw, jspsych: bool) -> tuple[str, list[str] | None]:
+    """Text value (1-based when numeric) or a ranking order ``a>b>c`` from any jsPsych response shape."""
+    if isinstance(raw, str) and raw.strip()[:1] in "[{":
+        try:
+            raw = json.loads(raw)
+        except json.JSONDecodeError:
+            pass
+    if isinstance(raw, dict):  # survey plugins: {"Q0": 2}
+        raw = next(iter(raw.values()), "")
+    if isinstance(raw, list):
+        return ">".join(str(x) for x in raw), None
+    text = _text(raw)
+    number = _number(text)
+    if jspsych and number is not None and float(number).is_integer():
+        return str(int(number) + 1), None  # jsPsych buttons and scales count from 0
+    return text, None
+
+
+def _text(value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return str(value).strip()
+
+
+def _number(value) -> float | None:
+    text = _text(value)
+    try:
+        number = float(text)
+    except ValueError:
+        return None
+    return None if math.isnan(number) else number

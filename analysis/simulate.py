@@ -1,0 +1,197 @@
+"""Synthetic participants: draw responses to a design from a :class:`~analysis.model_spec.GenerativeModel`.
+
+Everything is vectorised over data sets (``sims``), participants and trials, so the same code writes one
+realistic response file (:func:`simulate_responses`) and feeds thousands of data sets to the power
+analysis (:func:`draw`).
+
+>>> from analysis.io_design import load_design                         # doctest: +SKIP
+>>> from analysis.model_spec import load_model                          # doctest: +SKIP
+>>> d = load_design("design"); m = load_model(None, d)                  # doctest: +SKIP
+>>> simulate_responses(d, m, participants=16, seed=1).head()            # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from analysis.errors import AnalysisError
+from analysis.io_design import DesignInfo, arrangement_of
+from analysis.model_spec import GenerativeModel
+
+
+@dataclass
+class TrialPlan:
+    """Who sees what: per participant the trial list (stimulus index into ``stimuli``), test trials only
+    in ``test`` (participants × trials, same count for everyone), and all trials in ``trials``."""
+
+    trials: pd.DataFrame          # participant, <between>, block, trial, stimulus_id, repetition, practice
+    stimuli: list[str]            # stimulus ids, the index used by ``test``
+    test: np.ndarray              # participants × test trials → stimulus index
+    groups: pd.DataFrame          # participant → between levels
+
+
+def trial_plan(design: DesignInfo, participants: int) -> TrialPlan:
+    """Trial lists for ``participants`` people, reusing the design's lists cyclically beyond its N.
+
+    The design's participants are balanced over between groups, so participant p gets the list of the
+    design's participant ((p−1) mod N_design)+1; N must be a multiple of the number of groups.
+    """
+    if design.trials is None:
+        raise AnalysisError(f"{design.directory}: trials.csv is missing; it lists each participant's trials")
+    trials = design.trials.copy()
+    kind = trials["kind"] if "kind" in trials else np.where(_as_bool(trials["practice"]), "practice", "test")
+    trials = trials[pd.Series(kind, index=trials.index) != "familiarization"]
+    trials["practice"] = _as_bool(trials["practice"])
+    trials["participant"] = trials["participant"].astype(int)
+    base = sorted(trials["participant"].unique())
+    n_groups = max(1, len(design.test_conditions[design.between].drop_duplicates())) if design.between else 1
+    if participants < 1 or participants % n_groups:
+        raise AnalysisError(f"--participants: {participants} participants cannot be balanced over {n_groups} "
+                            f"between-subject groups; use a multiple of {n_groups}")
+    parts = []
+    for p in range(1, participants + 1):
+        source = trials[trials["participant"] == base[(p - 1) % len(base)]].copy()
+        source["participant"] = p
+        parts.append(source)
+    plan = pd.concat(parts, ignore_index=True)
+    plan["trial"] = plan["trial"].astype(int)
+    plan["repetition"] = plan["repetition"].astype(int)
+    stimuli = list(design.conditions["stimulus_id"])
+    index = {s: i for i, s in enumerate(stimuli)}
+    test = plan[~plan["practice"]]
+    counts = test.groupby("participant").size()
+    if counts.nunique() != 1:
+        raise AnalysisError(f"{design.directory}/trials.csv: participants have different numbers of test trials "
+                            f"({sorted(counts.unique())}); simulation needs the same number for everyone")
+    matrix = test["stimulus_id"].map(index).to_numpy().reshape(participants, -1)
+    groups = plan.groupby("participant")[design.between].first().reset_index() if design.between else \
+        pd.DataFrame({"participant": range(1, participants + 1)})
+    return TrialPlan(plan, stimuli, matrix, groups)
+
+
+def _as_bool(series: pd.Series) -> pd.Series:
+    return series.astype(str).str.strip().str.lower().isin(["true", "1", "yes"])
+
+
+# -- the linear predictor -------------------------------------------------------------------------
+
+def fixed_utilities(design: DesignInfo, model: GenerativeModel) -> np.ndarray:
+    """Fixed part of the latent value per stimulus × alternative (× screen position for choices).
+
+    Shape (stimuli, A): A = 1 for Likert; for choices column j is the alternative shown at position j+1.
+    """
+    rows = design.conditions.to_dict("records")
+    alt = design.alternatives
+    out = []
+    for row in rows:
+        arrangement = arrangement_of(row) or [None]
+        values = []
+        for position, level in enumerate(arrangement):
+            levels = {f.name: str(row.get(f.name, "")) for f in design.factors if f.role != "alternatives"}
+            if alt is not None and level is not None:
+                levels[alt.name] = level
+            value = model.intercept + sum(_term_value(t, levels) for t in model.effects)
+            values.append(value + (model.choice.position_bias if position == 0 and level is not None else 0.0))
+        out.append(values)
+    width = max(len(v) for v in out)
+    return np.array([v + [np.nan] * (width - len(v)) for v in out])
+
+
+def _term_value(term, levels: dict[str, str]) -> float:
+    key = ":".join(levels.get(f, "") for f in term.factors)
+    return term.values.get(key, 0.0)
+
+
+def _random_part(design: DesignInfo, model: GenerativeModel, plan: TrialPlan, rng: np.random.Generator,
+                 sims: int) -> np.ndarray:
+    """Participant random effects per trial (and position): sims × participants × trials × A."""
+    rows = design.conditions.to_dict("records")
+    n, t = plan.test.shape
+    width = max(1, max(len(arrangement_of(r)) for r in rows))
+    total = np.zeros((sims, n, t, width))
+    if model.random.intercept_sd and design.response_type == "likert":
+        total += rng.normal(0.0, model.random.intercept_sd, (sims, n, 1, 1))
+    for name, sd in sorted(model.random.slopes.items()):
+        factor = design.factor(name)
+        deviations = rng.normal(0.0, sd, (sims, n, len(factor.levels)))
+        code = np.array([[factor.levels.index(lv) if lv in factor.levels else -1 for lv in _levels_of(r, name, width)]
+                         for r in rows])           # stimuli × A, −1 where the factor does not apply
+        per_trial = code[plan.test]               # n × t × A
+        gathered = deviations[:, np.arange(n)[:, None, None], np.clip(per_trial, 0, None)]
+        total += np.where(per_trial[None] >= 0, gathered, 0.0)
+    return total
+
+
+def _levels_of(row: dict, factor: str, width: int) -> list[str]:
+    arrangement = arrangement_of(row)
+    if factor in row and row.get(factor, "") != "":
+        return [str(row[factor])] * width
+    return arrangement + [""] * (width - len(arrangement)) if arrangement else [""] * width
+
+
+# -- drawing --------------------------------------------------------------------------------------
+
+def draw(design: DesignInfo, model: GenerativeModel, plan: TrialPlan, rng: np.random.Generator,
+         sims: int = 1) -> np.ndarray:
+    """Responses for ``sims`` data sets: sims × participants × test trials.
+
+    Likert: ratings 1…k. k-AFC: the 0-based screen position chosen. Ranking: an extra last axis with the
+    0-based positions best first.
+    """
+    fixed = fixed_utilities(design, model)[plan.test]            # n × t × A
+    latent = fixed[None] + _random_part(design, model, plan, rng, sims)
+    if design.response_type == "likert":
+        noise = rng.normal(0.0, model.residual_sd, latent.shape[:3])
+        return 1 + np.searchsorted(np.asarray(model.thresholds), latent[..., 0] + noise).astype(np.int64)
+    gumbel = rng.gumbel(size=latent.shape)
+    utility = np.where(np.isnan(latent), -np.inf, latent + gumbel)
+    if design.response_type == "afc":
+        return np.argmax(utility, axis=-1)
+    return np.argsort(-utility, axis=-1, kind="stable")
+
+
+def simulate_responses(design: DesignInfo, model: GenerativeModel, participants: int, seed: int) -> pd.DataFrame:
+    """One synthetic data set as a trial table: the plan's rows (practice included) plus the answers.
+
+    Columns: participant, <between>, block, block_label, trial, stimulus_id, repetition, practice, and
+    ``rating`` (Likert), ``position`` (1-based, k-AFC) or ``order`` (positions best first, 1-based,
+    ``|``-joined, ranking); ``rt`` in seconds.
+    """
+    rng = np.random.default_rng(seed)
+    plan = trial_plan(design, participants)
+    test_answers = draw(design, model, plan, rng, sims=1)[0]
+    practice_plan = _practice_plan(design, plan)
+    practice_answers = draw(design, model, practice_plan, rng, sims=1)[0] if practice_plan else None
+    trials = plan.trials.reset_index(drop=True).copy()
+    column = {"likert": "rating", "afc": "position", "ranking": "order"}[design.response_type]
+    values = np.empty(len(trials), dtype=object)
+    is_test = ~trials["practice"].to_numpy()
+    values[is_test] = _format_answers(design, test_answers.reshape(-1, *test_answers.shape[2:]))
+    if practice_answers is not None:
+        values[~is_test] = _format_answers(design, practice_answers.reshape(-1, *practice_answers.shape[2:]))
+    trials[column] = values
+    trials["rt"] = np.round(rng.lognormal(np.log(2.5), 0.35, len(trials)), 3)
+    return trials
+
+
+def _practice_plan(design: DesignInfo, plan: TrialPlan) -> TrialPlan | None:
+    practice = plan.trials[plan.trials["practice"]]
+    if practice.empty:
+        return None
+    counts = practice.groupby("participant").size()
+    if counts.nunique() != 1 or len(counts) != len(plan.groups):
+        raise AnalysisError(f"{design.directory}/trials.csv: participants have different numbers of practice trials")
+    index = {s: i for i, s in enumerate(plan.stimuli)}
+    matrix = practice["stimulus_id"].map(index).to_numpy().reshape(len(counts), -1)
+    return TrialPlan(practice, plan.stimuli, matrix, plan.groups)
+
+
+def _format_answers(design: DesignInfo, answers: np.ndarray) -> list:
+    if design.response_type == "likert":
+        return [int(a) for a in answers]
+    if design.response_type == "afc":
+        return [int(a) + 1 for a in answers]
+    return ["|".join(str(int(p) + 1) for p in row if p >= 0) for row in answers]
