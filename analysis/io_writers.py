@@ -107,7 +107,7 @@ def qualtrics_text(sim: pd.DataFrame, design: DesignInfo, values: str = "text", 
     qid = {t: f"QID{i + 10}" for i, t in enumerate(tags)}
     blocks = list(dict.fromkeys(sim.sort_values(["block"])["block_label"]))
     block_name = {b: "Block_" + "".join(c if c.isalnum() else "_" for c in b) for b in blocks}
-    embedded = ["participant", *design.between]
+    embedded = ["participant", "shapemotion_protocol", *design.between]
     do_cols = [f"{block_name[b]}_DO" for b in blocks] + ["FL_5_DO"]
     question = str(design.protocol.get("response", {}).get("question", "Your answer"))
     rng = np.random.default_rng(seed)
@@ -124,7 +124,8 @@ def qualtrics_text(sim: pd.DataFrame, design: DesignInfo, values: str = "text", 
         shown = [by_block.get(b, "") for b in blocks]
         flow = "|".join(block_name[b] for b in rows.sort_values("trial")["block_label"].drop_duplicates())
         group = [str(rows.iloc[0][b]) for b in design.between]
-        body.append((meta, cells, [str(participant), *group], shown + [flow]))
+        protocol = str(design.protocol.get("name", ""))
+        body.append((meta, cells, [str(participant), protocol, *group], shown + [flow]))
     if legacy:
         return _legacy(body, question_cols, embedded, do_cols, question)
     header = [m[0] for m in META] + question_cols + embedded + do_cols
@@ -182,13 +183,16 @@ def _position_labels(design: DesignInfo, k: int) -> list[str]:
 # -- jsPsych -------------------------------------------------------------------------------------------
 
 def jspsych_records(sim: pd.DataFrame, design: DesignInfo) -> list[dict]:
-    """The trial objects ``jsPsych.data.get()`` holds: consent, then one video trial per answer."""
+    """The trial objects ``jsPsych.data.get()`` holds (docs/readme_survey.md): consent, one video trial
+    per answer, and the closing screen with ``end`` = 1."""
     out = []
+    protocol = str(design.protocol.get("name", ""))
     for participant, rows in sim.groupby("participant", sort=True):
+        common = {"participant": str(participant), "list": int(participant),
+                  **{b: str(rows.iloc[0][b]) for b in design.between}, "protocol": protocol}
         elapsed, index = 5000, 0
         out.append({"rt": 5000, "stimulus": "<p>Consent</p>", "response": 0, "trial_type": "html-button-response",
-                    "trial_index": 0, "time_elapsed": elapsed, "internal_node_id": "0.0-0.0",
-                    "participant": str(participant)})
+                    "trial_index": 0, "time_elapsed": elapsed, "internal_node_id": "0.0-0.0", **common})
         for rec in rows.sort_values("trial").to_dict("records"):
             index += 1
             rt = int(round(rec["rt"] * 1000))
@@ -196,10 +200,39 @@ def jspsych_records(sim: pd.DataFrame, design: DesignInfo) -> list[dict]:
             out.append({"rt": rt, "stimulus": [f"clips/{rec['stimulus_id']}.mp4"],
                         "response": _jspsych_response(rec, design), "trial_type": "video-button-response",
                         "trial_index": index, "time_elapsed": elapsed, "internal_node_id": f"0.0-{index}.0",
-                        "participant": str(participant), "stimulus_id": rec["stimulus_id"],
-                        "repetition": int(rec["repetition"]), "practice": bool(rec["practice"]),
-                        "block": int(rec["block"])})
+                        **common, "stimulus_id": rec["stimulus_id"], "clip_id": rec["stimulus_id"],
+                        "kind": "practice" if rec["practice"] else "test", "practice": int(bool(rec["practice"])),
+                        "block": int(rec["block"]), "block_label": rec["block_label"], "trial": int(rec["trial"]),
+                        "repetition": int(rec["repetition"]), **_placement(rec),
+                        "response_label": _response_label(rec, design), **_score_columns(rec, design)})
+        out.append({"rt": 1500, "stimulus": "<p>Thank you!</p>", "response": 0, "trial_type": "html-button-response",
+                    "trial_index": index + 1, "time_elapsed": elapsed + 1500,
+                    "internal_node_id": f"0.0-{index + 1}.0", **common, "end": 1})
     return out
+
+
+def _placement(rec: dict) -> dict:
+    arrangement = arrangement_of(rec)
+    if len(arrangement) == 2:
+        return {"left": arrangement[0], "right": arrangement[1]}
+    return {"positions": "|".join(arrangement)} if arrangement else {}
+
+
+def _response_label(rec: dict, design: DesignInfo) -> str:
+    if design.response_type == "likert":
+        return design.labels[int(rec["rating"]) - 1]
+    labels = _position_labels(design, len(arrangement_of(rec)))
+    if design.response_type == "afc":
+        return labels[int(rec["position"]) - 1]
+    return ""
+
+
+def _score_columns(rec: dict, design: DesignInfo) -> dict:
+    if design.response_type == "likert":
+        return {"rating": int(rec["rating"])}
+    if design.response_type == "afc":
+        return {"chosen": arrangement_of(rec)[int(rec["position"]) - 1]}
+    return {}
 
 
 def _jspsych_response(rec: dict, design: DesignInfo):

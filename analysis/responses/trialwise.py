@@ -21,12 +21,16 @@ def trialwise_answers(raw: RawFile, between: list[str]):
     rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
     pid_col = _participant_column(raw.columns)
     jspsych = raw.format.startswith("jspsych")
+    finished = _finished(rows, pid_col, raw) if "end" in raw.columns else None
     answers, exclusions = [], []
     for number, record, cells in zip(raw.row_numbers, rows, raw.rows):
         pid = _text(record.get(pid_col)) if pid_col else raw.path.stem
         if raw.format != "jspsych-json" and len(cells) != len(raw.columns):
             exclusions.append(Exclusion(number, pid, "malformed row",
                                         f"{len(cells)} fields, the header has {len(raw.columns)}"))
+            continue
+        if finished is not None and pid not in finished:
+            exclusions.append(Exclusion(number, pid, "unfinished", "no closing row with end = 1 for this participant"))
             continue
         sid = _text(record.get("stimulus_id"))
         if not sid:
@@ -38,6 +42,12 @@ def trialwise_answers(raw: RawFile, between: list[str]):
             continue
         answers.append(_answer(record, number, pid, sid, jspsych, between))
     return answers, exclusions
+
+
+def _finished(rows: list[dict], pid_col: str | None, raw: RawFile) -> set[str]:
+    """Participants whose data reach the closing screen (a row with ``end`` = 1)."""
+    return {(_text(r.get(pid_col)) if pid_col else raw.path.stem) for r in rows
+            if _text(r.get("end")).lower() in ("1", "true")}
 
 
 def _answer(record: dict, number: int, pid: str, sid: str, jspsych: bool, between: list[str]) -> Answer:

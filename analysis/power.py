@@ -1,0 +1,173 @@
+"""Simulation-based power analysis: how often does the planned analysis reject, per effect, for N participants?
+
+Data sets are drawn from a generative model (:mod:`analysis.simulate`), reduced to the design's
+dependent measure all at once (:func:`analysis.measures.measure_arrays`) and analysed by the vectorised
+ANOVA path (:func:`analysis.anova.anova_many`); k-AFC vote designs use the χ² goodness-of-fit test and
+ranking designs the Friedman test. The rejection rate of each effect comes with a 95 % Clopper–Pearson
+interval. :func:`power_sweep` repeats this over several N and :func:`required_participants` answers
+"how many participants for 80 % power on BODY×MOTION?".
+
+>>> from analysis.io_design import load_design                                  # doctest: +SKIP
+>>> d = load_design("design"); m = load_model(None, d)                           # doctest: +SKIP
+>>> power_analysis(d, m, participants=16, sims=500, seed=1).table                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from analysis.anova import anova_many
+from analysis.anova_core import Design as AnovaDesign
+from analysis.errors import AnalysisError
+from analysis.io_design import DesignInfo
+from analysis.measures import measure_arrays, within_levels
+from analysis.model_spec import GenerativeModel
+from analysis.simulate import TrialPlan, draw, trial_plan
+
+CHUNK = 250   # data sets per vectorised batch: bounded memory, frequent progress updates
+
+
+@dataclass
+class PowerResult:
+    """Rejection rate per effect for one N: columns effect, rejections, sims, power, ci_low, ci_high."""
+
+    participants: int
+    sims: int
+    alpha: float
+    table: pd.DataFrame
+    seconds: float
+
+    @property
+    def datasets_per_second(self) -> float:
+        return self.sims / self.seconds if self.seconds > 0 else float("inf")
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact binomial confidence interval of a rejection rate k/n.
+
+    >>> [round(x, 4) for x in clopper_pearson(50, 1000)]
+    [0.0373, 0.0654]
+    """
+    ci = stats.binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="exact")
+    return float(ci.low), float(ci.high)
+
+
+def anova_design(design: DesignInfo, plan: TrialPlan) -> AnovaDesign:
+    """The ANOVA engine's design for the plan's participants (between groups in participant order)."""
+    between = {b: design.factor(b).levels for b in design.between}
+    codes = np.array([[design.factor(b).levels.index(str(g)) for b, g in zip(design.between, row)]
+                      for row in plan.groups[design.between].itertuples(index=False)]) if between else None
+    within = within_levels(design)
+    if between:
+        return AnovaDesign.make(within=within, between=between, groups=codes)
+    return AnovaDesign.make(within=within, n_subjects=len(plan.groups))
+
+
+def testable_effects(design: DesignInfo, effects: list[str]) -> list[str]:
+    """Effects the measure can test: with percentages or rank points the alternatives always sum to a
+    constant within a cell, so only effects that involve the alternatives factor carry information."""
+    if design.response_type == "likert":
+        return list(effects)
+    alt = design.alternatives.name
+    return [e for e in effects if alt in e.split(":")]
+
+
+def power_analysis(design: DesignInfo, model: GenerativeModel, participants: int, sims: int, seed: int,
+                   alpha: float | None = None, progress: bool = False) -> PowerResult:
+    """Rejection rates of the design's planned tests over ``sims`` simulated data sets of N participants."""
+    if sims < 1:
+        raise AnalysisError(f"--sims: expected a positive number of simulated data sets, got {sims}")
+    alpha = design.alpha if alpha is None else alpha
+    rng = np.random.default_rng([seed, participants])
+    plan = trial_plan(design, participants)
+    start = time.perf_counter()
+    if design.dependent_measure in ("votes", "rank_points"):
+        names, rejections = _nonparametric(design, model, plan, rng, sims, alpha, progress)
+    else:
+        names, rejections = _anova_rejections(design, model, plan, rng, sims, alpha, progress)
+    seconds = time.perf_counter() - start
+    rows = []
+    for name, k in zip(names, rejections):
+        low, high = clopper_pearson(k, sims)
+        rows.append({"effect": name, "rejections": int(k), "sims": sims, "power": k / sims, "ci_low": low,
+                     "ci_high": high})
+    return PowerResult(participants, sims, alpha, pd.DataFrame(rows), seconds)
+
+
+def _chunks(sims: int, progress: bool, label: str):
+    from tqdm import tqdm
+    bar = tqdm(total=sims, desc=label, unit="data sets", disable=not progress, leave=False)
+    done = 0
+    while done < sims:
+        size = min(CHUNK, sims - done)
+        yield size
+        done += size
+        bar.update(size)
+    bar.close()
+
+
+def _anova_rejections(design, model, plan, rng, sims, alpha, progress):
+    compiled = anova_design(design, plan).compile()
+    names, counts = None, None
+    for size in _chunks(sims, progress, f"N={len(plan.groups)}"):
+        Y = measure_arrays(design, plan.test, draw(design, model, plan, rng, sims=size))
+        result = anova_many(Y, compiled, alpha=alpha, sphericity=False)
+        hits = (np.nan_to_num(result.p, nan=1.0) < alpha).sum(axis=0)
+        names = result.effects
+        counts = hits if counts is None else counts + hits
+    keep = testable_effects(design, names)
+    return keep, [int(counts[names.index(e)]) for e in keep]
+
+
+def _nonparametric(design, model, plan, rng, sims, alpha, progress):
+    """χ² on the vote counts (k-AFC) or Friedman on rank points (rankings), one test per data set."""
+    k = len(design.alternatives.levels)
+    hits = 0
+    for size in _chunks(sims, progress, f"N={len(plan.groups)}"):
+        values = measure_arrays(design, plan.test, draw(design, model, plan, rng, sims=size))
+        per_level = values.reshape(size, values.shape[1], -1, k).mean(axis=2)      # sims × n × k
+        for one in per_level:
+            if design.dependent_measure == "votes":
+                counts = one.sum(axis=0) / 100.0 * _trials_per_participant(plan)
+                p = stats.chisquare(counts).pvalue
+            else:
+                p = stats.friedmanchisquare(*one.T).pvalue if len(one) > 1 else 1.0
+            hits += int(np.nan_to_num(p, nan=1.0) < alpha)
+    name = f"{design.alternatives.name} ({'χ² votes' if design.dependent_measure == 'votes' else 'Friedman'})"
+    return [name], [hits]
+
+
+def _trials_per_participant(plan: TrialPlan) -> int:
+    return plan.test.shape[1]
+
+
+def power_sweep(design: DesignInfo, model: GenerativeModel, participants: list[int], sims: int, seed: int,
+                alpha: float | None = None, progress: bool = False) -> pd.DataFrame:
+    """:func:`power_analysis` for each N; one row per N × effect, plus data sets per second."""
+    frames = []
+    for n in participants:
+        result = power_analysis(design, model, n, sims, seed, alpha, progress)
+        frames.append(result.table.assign(participants=n, datasets_per_second=result.datasets_per_second))
+    table = pd.concat(frames, ignore_index=True)
+    return table[["participants", "effect", "rejections", "sims", "power", "ci_low", "ci_high", "datasets_per_second"]]
+
+
+def required_participants(sweep: pd.DataFrame, effect: str, target: float = 0.8) -> int | None:
+    """The smallest N of the sweep whose estimated power on ``effect`` reaches ``target`` (None if none)."""
+    wanted = _canonical(effect)
+    rows = sweep[sweep["effect"].map(_canonical) == wanted]
+    if rows.empty:
+        raise AnalysisError(f"--effect: {effect!r} is not one of the effects {sorted(sweep['effect'].unique())}")
+    hits = rows[rows["power"] >= target]
+    return int(hits["participants"].min()) if not hits.empty else None
+
+
+def _canonical(name: str) -> frozenset:
+    for sep in ("*", "×", " x "):
+        name = name.replace(sep, ":")
+    return frozenset(p.strip().upper() for p in name.split(":") if p.strip())
