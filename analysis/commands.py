@@ -1,0 +1,115 @@
+"""Analysis CLI commands. ``register(subparsers)`` adds each of them (see stimuli.cli).
+
+    shapemotion anova DATA.csv --dv COL --subject COL --within A B … --between D …
+        [--posthoc tukey] [--abbrev LEVEL=ABBR …] [--alpha .05] [--correction none|gg|hf]
+        [--format md|tex|csv|html|json] [--out FILE] [--json FILE] [--all]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from analysis.errors import AnalysisError
+
+TABLE_FORMATS = ("md", "tex", "csv", "html", "json")
+
+
+def register(subparsers) -> None:
+    """Add the analysis commands to the ``shapemotion`` sub-parsers."""
+    _register_anova(subparsers)
+
+
+# ---------------------------------------------------------------------------------------------- anova
+def _register_anova(subparsers) -> None:
+    p = subparsers.add_parser(
+        "anova",
+        help="split-plot (mixed) ANOVA with sphericity corrections, effect sizes, power and Tukey post-hoc",
+        description=(
+            "Type III split-plot ANOVA of a long-format CSV (one row per subject x within cell; several rows "
+            "of a cell are averaged) for any number of within and between factors, in the paper's table "
+            "layout. Prints the significant effects unless --all."
+        ),
+    )
+    p.add_argument("data", help="long-format CSV file")
+    p.add_argument("--dv", required=True, metavar="COL", help="dependent variable column (numeric)")
+    p.add_argument("--subject", required=True, metavar="COL", help="subject / participant id column")
+    p.add_argument("--within", nargs="+", default=[], metavar="FACTOR", help="within-subject factor columns")
+    p.add_argument("--between", nargs="+", default=[], metavar="FACTOR", help="between-subjects factor columns")
+    p.add_argument("--posthoc", choices=["tukey", "none"], default="none",
+                   help="Tukey HSD for every effect shown (Statistica convention)")
+    p.add_argument("--abbrev", nargs="+", default=[], metavar="LEVEL=ABBR",
+                   help="level abbreviations for post-hoc labels: LEVEL=ABBR or FACTOR:LEVEL=ABBR")
+    p.add_argument("--alpha", type=float, default=0.05, help="significance level and power alpha (default 0.05)")
+    p.add_argument("--correction", choices=["none", "gg", "hf"], default="none",
+                   help="sphericity correction of the p shown (default none, as the paper)")
+    p.add_argument("--format", choices=TABLE_FORMATS, default="md", help="table format (default md)")
+    p.add_argument("--out", metavar="FILE", help="write the table to FILE instead of standard output")
+    p.add_argument("--json", metavar="FILE", help="also write every effect as JSON (DESIGN.md schema)")
+    p.add_argument("--all", action="store_true", help="show every effect and the error strata, not only significant ones")
+    p.set_defaults(func=run_anova)
+
+
+def parse_abbreviations(items: list[str]) -> dict:
+    """``["Walk=W", "GAIT:Jog=J"]`` → ``{"Walk": "W", "GAIT": {"Jog": "J"}}``."""
+    out: dict = {}
+    for item in items:
+        key, sep, abbr = item.partition("=")
+        if not sep or not key or not abbr:
+            raise AnalysisError(f"--abbrev {item!r}: expected LEVEL=ABBR or FACTOR:LEVEL=ABBR")
+        factor, colon, level = key.partition(":")
+        if colon:
+            out.setdefault(factor, {})[level] = abbr
+        else:
+            out[key] = abbr
+    return out
+
+
+def read_csv(path: str):
+    """Read a CSV for analysis; the index becomes the CSV line number so that errors point at lines."""
+    import pandas as pd
+
+    if not Path(path).is_file():
+        raise AnalysisError(f"{path}: no such file")
+    try:
+        data = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise AnalysisError(f"{path}: not a readable CSV file ({str(exc).strip()})") from None
+    data.index = pd.RangeIndex(2, len(data) + 2)  # line 1 is the header
+    return data
+
+
+def _write(path: str, text: str) -> None:
+    target = Path(path)
+    if target.parent and not target.parent.exists():
+        target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(f".{target.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, target)
+
+
+def run_anova(args: argparse.Namespace) -> int:
+    from analysis.anova import anova
+    from analysis.posthoc import tukey_all
+    from analysis.tables import render
+
+    abbreviations = parse_abbreviations(args.abbrev)
+    data = read_csv(args.data)
+    try:
+        table = anova(data, dv=args.dv, subject=args.subject, within=args.within, between=args.between,
+                      alpha=args.alpha)
+    except AnalysisError as exc:
+        raise AnalysisError(f"{args.data}: {str(exc).replace('at row index', 'on CSV line')}") from None
+    if args.posthoc == "tukey":
+        effects = list(table.effects.index) if args.all else table.significant(correction=args.correction)
+        tukey_all(table, effects=effects, abbreviations=abbreviations)
+    text = render(table, args.format, all_rows=args.all, correction=args.correction)
+    if args.out:
+        _write(args.out, text)
+    else:
+        sys.stdout.write(text)
+    if args.json:
+        _write(args.json, table.to_json() + "\n")
+    return 0
