@@ -235,7 +235,7 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     rng = np.random.default_rng(seed)
     tests, practices, familiar = test_stimuli(protocol), practice_stimuli(protocol), familiarization_stimuli(protocol)
     blocks = block_cells(protocol)
-    orders = williams_orders(len(blocks)) if protocol.blocks.order == "counterbalanced" else None
+    orders = williams_orders(len(blocks)) if protocol.blocks.order in ("counterbalanced", "latin_square") else None
 
     group_of = _balanced_labels(n, len(group_cells), rng)
     trials: list[Trial] = []

@@ -147,8 +147,14 @@ class Alternatives(Strict):
 
 
 class Blocks(Strict):
+    """Which within factors define blocks, and how block order varies over participants.
+
+    ``counterbalanced`` (alias ``latin_square``): rows of a Williams Latin square dealt out evenly;
+    ``random``: a fresh random order per participant; ``fixed``: the declared order for everyone.
+    """
+
     by: list[str] = []
-    order: Literal["counterbalanced", "random", "fixed"] = "counterbalanced"
+    order: Literal["counterbalanced", "latin_square", "random", "fixed"] = "counterbalanced"
 
 
 class Practice(Strict):

@@ -41,7 +41,7 @@ def protocols(draw):
         "name": "random", "seed": draw(st.integers(0, 2**31)), "participants": cells * draw(st.integers(1, 4)),
         "actors": [{"id": "A1", "label": "A1", "sex": "F", "height_m": 1.65, "bmi": 23}],
         "factors": factors, "display": display, "alternatives": alternatives,
-        "clip": {"duration_s": 2}, "blocks": {"by": block_by, "order": draw(st.sampled_from(["counterbalanced", "random", "fixed"]))},
+        "clip": {"duration_s": 2}, "blocks": {"by": block_by, "order": draw(st.sampled_from(["counterbalanced", "latin_square", "random", "fixed"]))},
         "repetitions": draw(st.integers(1, 3)), "response": response,
         "analysis": {"dependent_measure": "mean_rating"},
     }
