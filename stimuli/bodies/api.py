@@ -1,0 +1,114 @@
+"""Public entry points: one body from targets, the body of a protocol actor, all bodies of a protocol."""
+
+from __future__ import annotations
+
+import math
+import time
+
+from stimuli.bodies import backend, cache
+from stimuli.bodies.body import Body, FitReport, build_body
+from stimuli.bodies.fit import BMI_TOLERANCE, FITTER_VERSION, HEIGHT_TOLERANCE_M, Targets, fit, phenotypes
+from stimuli.errors import StimuliError
+
+_SEXES = {"F": "F", "FEMALE": "F", "W": "F", "M": "M", "MALE": "M"}
+
+
+class BodyFitError(StimuliError):
+    """A target the body model cannot reach within tolerance; ``nearest`` is the closest body it can."""
+
+    def __init__(self, message: str, nearest: Body | None = None):
+        super().__init__(message)
+        self.nearest = nearest
+
+
+def normalise_sex(sex) -> str:
+    """'F'/'M' from common spellings; StimuliError naming the value otherwise."""
+    key = str(sex).strip().upper() if sex is not None else ""
+    if key not in _SEXES:
+        raise StimuliError(f"sex must be 'F' or 'M' (got {sex!r}): the body model needs it to choose the phenotype")
+    return _SEXES[key]
+
+
+def _check_number(name: str, value, low: float, high: float) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise StimuliError(f"{name} must be a number (got {value!r})") from None
+    if not math.isfinite(value) or not low < value < high:
+        raise StimuliError(f"{name} = {value} is not a human value (expected between {low} and {high})")
+    return value
+
+
+def fit_body(sex, height_m, bmi, *, waist_m=None, hip_m=None, chest_m=None, age_years: float = 30.0,
+             body_id: str | None = None, on_unreachable: str = "raise", use_cache: bool = True) -> Body:
+    """A body of the given sex, height (m) and BMI (kg/m²), optionally waist/hip/chest girths (m).
+
+    Raises BodyFitError (with ``.nearest``) when the target is out of reach of the body model
+    (|height error| > 1 cm or |BMI error| > 0.5) unless ``on_unreachable="nearest"``, which returns
+    the nearest body with ``fit.reachable`` False.
+
+    Examples
+    --------
+    >>> body = fit_body("F", 1.60, 28.1)                        # doctest: +SKIP
+    >>> round(body.anthropometry.height_m, 2), round(body.anthropometry.bmi, 1)  # doctest: +SKIP
+    (1.6, 28.1)
+    """
+    if on_unreachable not in ("raise", "nearest"):
+        raise ValueError("on_unreachable must be 'raise' or 'nearest'")
+    targets = Targets(
+        sex=normalise_sex(sex), height_m=_check_number("height_m", height_m, 0.0, 10.0),
+        bmi=_check_number("bmi", bmi, 0.0, 1000.0),
+        waist_m=None if waist_m is None else _check_number("waist_m", waist_m, 0.0, 10.0),
+        hip_m=None if hip_m is None else _check_number("hip_m", hip_m, 0.0, 10.0),
+        chest_m=None if chest_m is None else _check_number("chest_m", chest_m, 0.0, 10.0),
+        age_years=_check_number("age_years", age_years, 17.9, 90.1),
+    )
+    body_id = body_id or f"{targets.sex}_h{targets.height_m * 100:.0f}_b{targets.bmi:.1f}"
+    key = cache.cache_key(targets.key(), FITTER_VERSION)
+    body = cache.load(key, body_id) if use_cache else None
+    if body is None:
+        body = _fit_new(targets, body_id)
+        if use_cache:
+            cache.save(body, key)
+    if not body.fit.reachable and on_unreachable == "raise":
+        raise BodyFitError(body.fit.message, nearest=body)
+    return body
+
+
+def _fit_new(targets: Targets, body_id: str) -> Body:
+    start = time.perf_counter()
+    result = fit(targets)
+    names = tuple(result.parameters)
+    import numpy as np
+
+    x = np.array([result.parameters[n] for n in names])
+    out = backend.evaluate(phenotypes(targets, x, names))
+    height_err = result.measured["height_m"] - targets.height_m
+    bmi_err = result.measured["bmi"] - targets.bmi
+    message = "" if result.reachable else (
+        f"body {body_id}: {targets.sex} height {targets.height_m:.3f} m, BMI {targets.bmi:.1f} is out of reach of "
+        f"the Anny body model (tolerance ±{HEIGHT_TOLERANCE_M * 100:.0f} cm, ±{BMI_TOLERANCE} BMI); the nearest "
+        f"body has height {result.measured['height_m']:.3f} m and BMI {result.measured['bmi']:.1f}")
+    report = FitReport(reachable=result.reachable, height_error_m=height_err, bmi_error=bmi_err,
+                       seconds=time.perf_counter() - start, cached=False, iterations=result.iterations,
+                       message=message)
+    target_dict = {"height_m": targets.height_m, "bmi": targets.bmi, "waist_m": targets.waist_m,
+                   "hip_m": targets.hip_m, "chest_m": targets.chest_m}
+    return build_body(body_id, targets.sex, target_dict, result.phenotype, out, 0, report)
+
+
+def body_for_actor(actor, **kwargs) -> Body:
+    """The body of a ``stimuli.protocol.Actor`` (its sex, height, BMI and any girths); id = actor.id."""
+    return fit_body(actor.sex, actor.height_m, actor.bmi, waist_m=getattr(actor, "waist_m", None),
+                    hip_m=getattr(actor, "hip_m", None), chest_m=getattr(actor, "chest_m", None),
+                    body_id=actor.id, **kwargs)
+
+
+def bodies_for_protocol(protocol, include_practice: bool = True, progress: bool = False, **kwargs) -> list[Body]:
+    """Bodies of every actor of a protocol, in protocol order (cached after the first run)."""
+    actors = [a for a in protocol.actors if include_practice or not getattr(a, "practice_only", False)]
+    if progress:
+        from tqdm import tqdm
+
+        actors = tqdm(actors, desc="bodies", unit="body")
+    return [body_for_actor(a, **kwargs) for a in actors]

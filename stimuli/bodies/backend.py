@@ -1,0 +1,125 @@
+"""Anny as the body backend: one model per process, its cache under the project's cache folder.
+
+Everything that touches the ``anny`` package lives here (plus ``frame.py`` for the axes), so a
+new Anny release is checked in one module. Importing this module does not import torch; the
+first call to :func:`model` does (about 2 s), and the first model build ever writes Anny's
+cache (about 1 min, 0.8 GB), later loads take well under a second.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+# Anny's own density (kg/m³) in anny.Anthropometry: mass = volume × density.
+ANNY_DENSITY = 980.0
+# Anny's phenotype labels exposed by the default model, in its order.
+PHENOTYPE_LABELS = ("gender", "age", "muscle", "weight", "height", "proportions")
+LOAD_SECONDS: dict[str, float] = {}
+
+
+def project_cache_root() -> Path:
+    """``$SHAPEMOTION_CACHE`` or the project's ``.cache`` folder (the checkout holding ``stimuli/``)."""
+    configured = os.environ.get("SHAPEMOTION_CACHE")
+    if configured:
+        return Path(configured).expanduser()
+    project = Path(__file__).resolve().parents[2]
+    if (project / "pyproject.toml").exists():
+        return project / ".cache"
+    return Path.cwd() / ".cache"
+
+
+def anny_cache_dir() -> Path:
+    """``ANNY_CACHE_DIR`` when the user set it, else ``<project cache>/anny`` (never the home folder)."""
+    configured = os.environ.get("ANNY_CACHE_DIR")
+    return Path(configured).expanduser() if configured else project_cache_root() / "anny"
+
+
+def anny_version() -> str:
+    """Installed Anny version (part of every body cache key)."""
+    try:
+        return importlib.metadata.version("anny")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+@functools.lru_cache(maxsize=1)
+def model():
+    """The Anny full-body model (default rig and topology), loaded once per process.
+
+    ``extrapolate_phenotypes=True`` only matters outside [0, 1], which the fitter allows a little
+    for weight/muscle to reach BMI 40 for women; inside [0, 1] results are identical.
+    """
+    # Warp (Anny's CPU skinning kernels) compiles into the home folder unless told otherwise.
+    os.environ.setdefault("WARP_CACHE_PATH", str(project_cache_root() / "warp"))
+    start = time.perf_counter()
+    import torch  # noqa: F401  (timed with the model: it is the bulk of a cold start)
+    import anny
+    from anny.paths import set_anny_cache_path
+
+    LOAD_SECONDS["import"] = time.perf_counter() - start
+    cache = anny_cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    set_anny_cache_path(cache)
+    start = time.perf_counter()
+    built = anny.Anny(extrapolate_phenotypes=True)
+    built.eval()
+    LOAD_SECONDS["model"] = time.perf_counter() - start
+    return built
+
+
+def evaluate(phenotypes: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Rest-pose bodies for a batch of phenotype vectors (Anny frame, float64 numpy).
+
+    Returns ``rest_vertices`` (B, V, 3), ``rest_bone_heads`` (B, J, 3),
+    ``rest_bone_poses`` (B, J, 4, 4), and Anny's own ``height``, ``volume``, ``waist`` (B,).
+    """
+    import torch
+
+    m = model()
+    batch = max(np.size(v) for v in phenotypes.values())
+    kwargs = {
+        k: torch.as_tensor(np.broadcast_to(np.asarray(v, float), (batch,)).copy(), dtype=m.dtype)
+        for k, v in phenotypes.items()
+    }
+    with torch.no_grad():
+        rest = m(phenotype_kwargs=kwargs)
+        measure = _anthropometry()(rest["rest_vertices"])
+    keep = ("rest_vertices", "rest_bone_heads", "rest_bone_poses")
+    out = {k: rest[k].cpu().numpy() for k in keep}
+    out["height"] = measure["height"].cpu().numpy()
+    out["volume"] = measure["volume"].cpu().numpy()
+    out["waist"] = measure["waist_circumference"].cpu().numpy()
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _anthropometry():
+    import anny
+
+    return anny.Anthropometry(model())
+
+
+@functools.lru_cache(maxsize=1)
+def topology() -> dict[str, object]:
+    """Faces, skinning weights/indices, bone names and parents (shared by every Anny body)."""
+    m = model()
+    return {
+        "faces": m.faces.cpu().numpy().astype(np.int64),
+        "weights": m.vertex_bone_weights.cpu().numpy(),
+        "indices": m.vertex_bone_indices.cpu().numpy().astype(np.int64),
+        "bone_names": list(m.bone_labels),
+        "bone_parents": np.asarray(m.bone_parents, dtype=np.int64),
+    }
+
+
+def skin(rest_vertices, bone_transforms):
+    """Anny's linear-blend skinning of (1 or T, V, 3) rest vertices by (T, J, 4, 4) transforms (torch)."""
+    m = model()
+    rest = rest_vertices.expand(bone_transforms.shape[0], -1, -1)
+    return m.get_skinned_vertices(rest, bone_transforms)

@@ -1,0 +1,92 @@
+"""``shapemotion bodies``: fitted Anny bodies for a protocol's actors, or one body from sex/height/BMI."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from stimuli.errors import StimuliError
+
+BACKENDS = ("anny",)
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "bodies", help="fit body meshes to sex, height and BMI (Anny)",
+        description="Fit Anny bodies to every actor of a protocol (writes bodies.csv, meshes/<body_id>.ply, "
+                    "anthropometry.csv, segments.csv, contact_sheet.png into --out), or one body from "
+                    "--sex/--height/--bmi (writes the mesh to --out, a .ply/.obj/.glb file).")
+    p.add_argument("protocol", type=Path, nargs="?", help="protocol YAML (omit for a single body)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (protocol) or mesh file (single body)")
+    p.add_argument("--sex", help="F or M (single body)")
+    p.add_argument("--height", type=float, help="standing height in metres (single body)")
+    p.add_argument("--bmi", type=float, help="body-mass index in kg/m² (single body)")
+    p.add_argument("--waist", type=float, help="optional waist girth in metres")
+    p.add_argument("--hip", type=float, help="optional hip girth in metres")
+    p.add_argument("--chest", type=float, help="optional chest girth in metres")
+    p.add_argument("--json", type=Path, help="single body: also write anthropometry, segments and fit as JSON")
+    p.add_argument("--backend", default="anny", help="body model backend (default: anny)")
+    p.add_argument("--allow-nearest", action="store_true",
+                   help="write the nearest reachable body where a target is out of reach (default: exit 2)")
+    p.add_argument("--no-sheet", action="store_true", help="protocol: skip the contact-sheet PNG")
+    p.set_defaults(func=run_bodies)
+
+
+def run_bodies(args: argparse.Namespace) -> int:
+    if args.backend not in BACKENDS:
+        raise StimuliError(f"--backend {args.backend!r} is not available; known backends: {', '.join(BACKENDS)}")
+    single = [args.sex, args.height, args.bmi]
+    if args.protocol is not None:
+        if any(v is not None for v in single):
+            raise StimuliError("give either a PROTOCOL or --sex/--height/--bmi, not both")
+        return _run_protocol(args)
+    missing = [name for name, v in zip(("--sex", "--height", "--bmi"), single) if v is None]
+    if missing:
+        raise StimuliError(f"a single body needs {', '.join(missing)} (or give a PROTOCOL file)")
+    return _run_single(args)
+
+
+def _run_protocol(args) -> int:
+    from stimuli.bodies.export import fit_protocol_bodies, write_bodies
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol(args.protocol)
+    bodies = fit_protocol_bodies(protocol, allow_nearest=args.allow_nearest)
+    write_bodies(bodies, args.out, sheet=not args.no_sheet, title=f"{protocol.name}: bodies sorted by BMI")
+    for b in bodies:
+        a = b.anthropometry
+        flag = "" if b.fit.reachable else "  NEAREST (target out of reach)"
+        print(f"{b.body_id:<12} {b.sex}  height {a.height_m:.3f} m  BMI {a.bmi:5.2f}  mass {a.mass_kg:5.1f} kg  "
+              f"waist {a.waist_m:.3f} m{flag}")
+    print(f"wrote {len(bodies)} bodies to {args.out}")
+    return 0
+
+
+def _run_single(args) -> int:
+    from stimuli.bodies import fit_body
+
+    if args.out.suffix.lower() not in (".ply", ".obj", ".glb", ".stl"):
+        raise StimuliError(f"--out {args.out}: a single body is written as a mesh file (.ply, .obj, .glb or .stl)")
+    body = fit_body(args.sex, args.height, args.bmi, waist_m=args.waist, hip_m=args.hip, chest_m=args.chest,
+                    on_unreachable="nearest" if args.allow_nearest else "raise")
+    if args.out.suffix.lower() == ".ply":
+        body.save_ply(args.out)
+    else:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        body.to_trimesh().export(args.out)
+    a = body.anthropometry
+    print(f"{body.body_id}: height {a.height_m:.3f} m, BMI {a.bmi:.2f}, mass {a.mass_kg:.1f} kg, waist {a.waist_m:.3f} m,"
+          f" hip {a.hip_m:.3f} m, chest {a.chest_m:.3f} m -> {args.out}")
+    if not body.fit.reachable:
+        print(f"warning: {body.fit.message}")
+    if args.json:
+        from stimuli.fileio import atomic_write_text
+
+        report = {"body_id": body.body_id, "sex": body.sex, "targets": body.targets, "phenotype": body.phenotype,
+                  "anthropometry": body.anthropometry.as_dict(), "fit": {
+                      "reachable": body.fit.reachable, "height_error_m": body.fit.height_error_m,
+                      "bmi_error": body.fit.bmi_error},
+                  "segments": [s.as_row() for s in body.segments]}
+        atomic_write_text(args.json, json.dumps(report, indent=2, sort_keys=True) + "\n")
+    return 0
