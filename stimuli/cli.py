@@ -20,6 +20,7 @@ from stimuli.errors import StimuliError
 COMMAND_MODULES = [
     "stimuli.commands.protocol_cmds",
     "analysis.commands",
+    "stimuli.commands.bodies_cmd",
 ]
 
 
