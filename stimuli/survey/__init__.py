@@ -1,0 +1,67 @@
+"""Survey export: a design (or render) folder → Qualtrics QSF, Qualtrics Advanced TXT, a self-hosted
+jsPsych experiment, or PsychoPy conditions files.
+
+>>> from stimuli.survey import FORMATS
+>>> FORMATS
+('qsf', 'qualtrics-txt', 'jspsych', 'psychopy')
+
+The data each export produces is documented in ``docs/readme_survey.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from stimuli.fileio import atomic_write_text
+from stimuli.survey.source import SurveySource, load_source
+
+FORMATS = ("qsf", "qualtrics-txt", "jspsych", "psychopy")
+
+__all__ = ["FORMATS", "ExportResult", "export_survey", "load_source", "SurveySource"]
+
+
+@dataclass
+class ExportResult:
+    """What was written, and what the researcher still has to do."""
+
+    path: Path
+    format: str
+    notes: list[str] = field(default_factory=list)
+    manual_steps: list[str] = field(default_factory=list)
+
+
+def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url: str | None = None,
+                  post_url: str = "") -> ExportResult:
+    """Export the survey of ``folder`` (design or render output) as ``fmt`` into ``out``."""
+    from stimuli.errors import StimuliError
+
+    if fmt not in FORMATS:
+        raise StimuliError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
+    source = load_source(folder)
+    out = Path(out)
+    result = ExportResult(out, fmt)
+    if fmt in ("qsf", "qualtrics-txt") and not video_base_url:
+        result.notes.append("no --video-base-url: clips are referenced by relative paths (clips/…), which a "
+                            "survey hosted by Qualtrics cannot load; pass the URL where the clips are served")
+    if fmt == "qsf":
+        from stimuli.survey.qsf import qsf_text
+
+        atomic_write_text(out, qsf_text(source, video_base_url))
+    elif fmt == "qualtrics-txt":
+        from stimuli.survey.qualtrics_txt import manual_steps, txt_text
+
+        atomic_write_text(out, txt_text(source, video_base_url))
+        result.manual_steps = manual_steps(source)
+    elif fmt == "jspsych":
+        from stimuli.survey.jspsych import write_jspsych
+
+        missing = write_jspsych(source, out, post_url)
+        if missing:
+            result.notes.append(f"{len(missing)} clip(s) not found in {source.folder} (e.g. "
+                                f"{source.stimulus(missing[0]).file}); copy them into {out}/clips/ before running")
+    else:
+        from stimuli.survey.psychopy import write_psychopy
+
+        write_psychopy(source, out)
+    return result

@@ -1,0 +1,85 @@
+"""PsychoPy Builder inputs: a conditions file per block and part, a blocks file, and the trial lists.
+
+Written into one folder::
+
+    blocks.csv                       outer loop: one row per block (declared order) with the names of
+                                     its conditions files; set the loop to random/sequential per protocol
+    conditions/<block>_test.csv      one row per test stimulus (set the inner loop's nReps to
+                                     ``repetitions`` and its type to random)
+    conditions/<block>_practice.csv  the practice pool (draw ``practice_per_block`` rows)
+    conditions/<block>_familiarization.csv   the familiarisation clips, in order (sequential loop)
+    trials.csv                       every participant's seeded trial list with its movie file, for a
+                                     script that replays the design exactly (loop over rows where
+                                     ``participant`` is the session's participant)
+
+Each conditions row has ``stimulus_id``, ``movie`` (path relative to the folder, as PsychoPy's
+MovieStim wants), the factor levels, ``left``/``right`` or ``positions``, ``question`` and the answer
+options (``options`` = labels joined by ``|``). With several between groups, the files carry the group in
+their name (``SEX=F|GAIT=walk`` → ``SEX-F_GAIT-walk``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from stimuli.fileio import csv_text, write_all_or_nothing
+from stimuli.survey.plan import build_plan
+from stimuli.survey.source import StimulusInfo, SurveySource
+from stimuli.survey.text import answer_labels
+
+
+def _name(label: str) -> str:
+    return "".join(c if c.isalnum() or c in "._" else "-" for c in label.replace("|", "_").replace("=", "-"))
+
+
+def _row(source: SurveySource, s: StimulusInfo, movie_prefix: str) -> dict[str, object]:
+    p = source.protocol
+    factors = [f.name for f in p.factors if f.role != "alternatives"]
+    row = {"stimulus_id": s.stimulus_id, "movie": movie_prefix + s.file, "kind": s.kind}
+    row |= {name: s.levels.get(name, "") for name in factors}
+    if len(s.arrangement) == 2:
+        row |= {"left": s.arrangement[0], "right": s.arrangement[1]}
+    elif s.arrangement:
+        row["positions"] = "|".join(s.arrangement)
+    return row | {"question": p.response.question, "options": "|".join(answer_labels(p))}
+
+
+def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, str]:
+    """File name (relative to the output folder) → CSV text."""
+    p = source.protocol
+    files: dict[str, str] = {}
+    blocks = []
+    for plan in build_plan(source):
+        for rotation in plan.rotations:
+            for block in rotation.blocks:
+                parts = list(plan.groups.items()) + ([("rotation", str(rotation.index))]
+                                                      if rotation.index is not None else [])
+                stem = _name("_".join(f"{k}-{v}" for k, v in parts) + ("_" if parts else "") + block.label)
+                entry = dict(plan.groups) | ({"rotation": rotation.index} if rotation.index is not None else {})
+                entry |= {"block_label": block.label, "nReps": p.repetitions,
+                          "test_file": f"conditions/{stem}_test.csv", "practice_file": "",
+                          "practice_per_block": block.practice_count, "familiarization_file": ""}
+                tests = [s for s, rep in block.tests if rep == 1]
+                files[entry["test_file"]] = csv_text([_row(source, s, movie_prefix) for s in tests])
+                if block.practice_count:
+                    entry["practice_file"] = f"conditions/{stem}_practice.csv"
+                    files[entry["practice_file"]] = csv_text([_row(source, s, movie_prefix) for s in block.practice])
+                if block.familiarization:
+                    entry["familiarization_file"] = f"conditions/{stem}_familiarization.csv"
+                    files[entry["familiarization_file"]] = csv_text(
+                        [_row(source, s, movie_prefix) for s in block.familiarization])
+                blocks.append(entry)
+    files["blocks.csv"] = csv_text(blocks)
+    files["trials.csv"] = csv_text([t | {"movie": movie_prefix + source.stimulus(t["stimulus_id"]).file}
+                                    for t in source.trials])
+    return files
+
+
+def write_psychopy(source: SurveySource, out_dir: str | Path) -> list[Path]:
+    """Write the PsychoPy folder. ``movie`` paths are relative to it (where the ``.psyexp`` goes) and
+    point at the clips in the source folder."""
+    out_dir = Path(out_dir)
+    prefix = os.path.relpath(source.folder.resolve(), out_dir.resolve()).replace(os.sep, "/") + "/"
+    prefix = "" if prefix == "./" else prefix
+    return write_all_or_nothing(out_dir, psychopy_files(source, prefix))

@@ -1,0 +1,238 @@
+"""Qualtrics Survey Format (``.qsf``): the JSON file Qualtrics exports and imports (Create project →
+Survey → From a file).
+
+The file holds ``SurveyEntry`` (the survey's identity) and ``SurveyElements``: ``BL`` (blocks and
+their question-randomisation options), ``FL`` (survey flow), ``SO`` (options), ``SCO``, ``PROJ``,
+``STAT``, ``QC`` (question count), ``RS`` (response set) and one ``SQ`` per question. The procedure:
+
+consent → instructions → *BlockRandomizer* (one of the between groups, ``EvenPresentation``, which
+sets the group's embedded data) → [*BlockRandomizer* over arrangement rotations] → the blocks
+(a *BlockRandomizer* over them when the order is random or counterbalanced), each a *Group* of
+familiarisation page(s), practice intro + practice questions, and the test questions (one per page,
+in random order; every stimulus ``repetitions`` times) → end.
+
+IDs are derived from the protocol name, so the same design gives a byte-identical file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import string
+
+from stimuli.survey.plan import BlockPlan, GroupPlan, build_plan, export_tag
+from stimuli.survey.qsf_questions import descriptive, video_question
+from stimuli.survey.source import SurveySource, clip_url
+from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, consent_html, escape, instructions_html,
+                                 question_html, video_html)
+
+ALPHABET = string.digits + string.ascii_letters
+NEVER = "0000-00-00 00:00:00"
+ROTATION_FIELD = "arrangement_rotation"
+PROTOCOL_FIELD = "shapemotion_protocol"
+
+
+def qualtrics_id(prefix: str, *parts: str) -> str:
+    """A Qualtrics-style id (``SV_``/``BL_``/``RS_`` + 15 base-62 characters) derived from ``parts``.
+
+    >>> qualtrics_id("BL_", "demo", "block 1")[:3], len(qualtrics_id("BL_", "x"))
+    ('BL_', 18)
+    """
+    number = int.from_bytes(hashlib.sha256("\x1f".join(parts).encode()).digest()[:12], "big")
+    chars = []
+    for _ in range(15):
+        number, digit = divmod(number, 62)
+        chars.append(ALPHABET[digit])
+    return prefix + "".join(chars)
+
+
+class QsfBuilder:
+    """Collects questions, blocks and flow elements with consecutive ``QID``/``FL`` numbers."""
+
+    def __init__(self, source: SurveySource, video_base_url: str | None):
+        self.source = source
+        self.protocol = source.protocol
+        self.base_url = video_base_url
+        self.name = self.protocol.name
+        self.survey_id = qualtrics_id("SV_", self.name)
+        self.questions: list[dict] = []
+        self.blocks: list[dict] = []
+        self.flow_count = 1
+
+    # -- ids ----------------------------------------------------------------------------------
+    def flow_id(self) -> str:
+        self.flow_count += 1
+        return f"FL_{self.flow_count}"
+
+    def next_qid(self) -> str:
+        return f"QID{len(self.questions) + 1}"
+
+    # -- questions and blocks -----------------------------------------------------------------
+    def clip(self, stimulus) -> str:
+        p = self.protocol
+        return video_html(clip_url(self.base_url, stimulus.file), p.clip.width, p.clip.height)
+
+    def add_text(self, tag: str, html_text: str, has_video: bool = False) -> str:
+        qid = self.next_qid()
+        self.questions.append(descriptive(self.survey_id, qid, tag, html_text, has_video))
+        return qid
+
+    def add_video_question(self, tag: str, stimulus) -> str:
+        qid = self.next_qid()
+        html_text = question_html(self.protocol) + self.clip(stimulus)
+        self.questions.append(video_question(self.survey_id, qid, tag, html_text, self.protocol))
+        return qid
+
+    def add_block(self, description: str, qids: list[str], randomize: str = "false", subset: int = 0,
+                  kind: str = "Standard") -> str:
+        """A block; ``randomize``: ``false`` (page per question, fixed order), ``RandomWithXPerPage``
+        (all questions, random order, one per page) or ``RandomWithOnlyX`` (a random ``subset``)."""
+        block_id = qualtrics_id("BL_", self.name, description)
+        elements = []
+        for qid in qids:
+            if elements and randomize == "false":
+                elements.append({"Type": "Page Break"})
+            elements.append({"Type": "Question", "QuestionID": qid})
+        options = {"BlockLocking": "false", "RandomizeQuestions": randomize, "BlockVisibility": "Expanded"}
+        if randomize == "RandomWithXPerPage":
+            options["Randomization"] = {"Advanced": {"QuestionsPerPage": 1}, "EvenPresentation": False}
+        elif randomize == "RandomWithOnlyX":
+            options["Randomization"] = {"Advanced": {"TotalRandSubset": subset, "QuestionsPerPage": 1},
+                                        "EvenPresentation": True}
+        block = {"Type": kind, "Description": description[:100], "ID": block_id, "BlockElements": elements,
+                 "Options": options}
+        if kind == "Standard":
+            block = {"Type": kind, "SubType": ""} | {k: v for k, v in block.items() if k != "Type"}
+        self.blocks.append(block)
+        return block_id
+
+    # -- flow ---------------------------------------------------------------------------------
+    def block_ref(self, block_id: str, kind: str = "Standard") -> dict:
+        return {"ID": block_id, "Type": kind, "FlowID": self.flow_id(), "Autofill": []}
+
+    def randomizer(self, flow: list[dict], subset: int) -> dict:
+        return {"Type": "BlockRandomizer", "FlowID": self.flow_id(), "SubSet": subset, "EvenPresentation": True,
+                "Flow": flow}
+
+    def group(self, description: str, flow: list[dict]) -> dict:
+        return {"Type": "Group", "FlowID": self.flow_id(), "Description": description[:100], "Flow": flow}
+
+    def embedded(self, values: dict[str, str]) -> dict:
+        return {"Type": "EmbeddedData", "FlowID": self.flow_id(), "EmbeddedData": [
+            {"Description": k, "Type": "Custom", "Field": k, "VariableType": "String", "DataVisibility": [],
+             "AnalyzeText": False, "Value": v} for k, v in values.items()]}
+
+
+def build_qsf(source: SurveySource, video_base_url: str | None = None) -> dict:
+    """The whole QSF document of ``source``'s procedure, as a JSON-ready dict."""
+    b = QsfBuilder(source, video_base_url)
+    p = source.protocol
+    consent = b.add_block("Consent", [b.add_text("consent", consent_html(p))], kind="Default")
+    instructions = b.add_block("Instructions", [b.add_text("instructions", instructions_html(p))])
+    fields = {PROTOCOL_FIELD: p.name} | {name: "" for name in source.between}
+    plans = build_plan(source)
+    if any(r.index is not None for g in plans for r in g.rotations):
+        fields[ROTATION_FIELD] = ""
+    flow = [b.embedded(fields), b.block_ref(consent, "Block"), b.block_ref(instructions)]
+    flow += _assignment_flow(b, plans)
+    flow.append({"Type": "EndSurvey", "FlowID": b.flow_id()})
+    return _document(b, flow)
+
+
+def _assignment_flow(b: QsfBuilder, plans: list[GroupPlan]) -> list[dict]:
+    """Between groups, balanced by Qualtrics (one of them per respondent, evenly presented)."""
+    branches = []
+    for plan in plans:
+        inner = ([b.embedded(plan.groups)] if plan.groups else []) + _rotation_flow(b, plan)
+        branches.append(b.group(f"Group {plan.label}", inner) if len(plans) > 1 else inner)
+    return [b.randomizer(branches, 1)] if len(plans) > 1 else branches[0]
+
+
+def _rotation_flow(b: QsfBuilder, plan: GroupPlan) -> list[dict]:
+    if len(plan.rotations) == 1:
+        return _blocks_flow(b, plan, plan.rotations[0].blocks, "")
+    branches = []
+    for rotation in plan.rotations:
+        tag = f" rotation {rotation.index}"
+        inner = [b.embedded({ROTATION_FIELD: str(rotation.index)})] + _blocks_flow(b, plan, rotation.blocks, tag)
+        branches.append(b.group(f"{plan.label}{tag}", inner))
+    return [b.randomizer(branches, 1)]
+
+
+def _blocks_flow(b: QsfBuilder, plan: GroupPlan, blocks: list[BlockPlan], tag: str) -> list[dict]:
+    units = [b.group(f"{plan.label} | {block.label}{tag}", _block_flow(b, plan, block, tag)) for block in blocks]
+    if len(units) > 1 and b.protocol.blocks.order != "fixed":
+        return [b.randomizer(units, len(units))]
+    return units
+
+
+def _block_flow(b: QsfBuilder, plan: GroupPlan, block: BlockPlan, tag: str) -> list[dict]:
+    """Familiarisation page(s), practice, then the test questions of one block."""
+    name = f"{plan.label} | {block.label}{tag}"
+    repetitions = b.protocol.repetitions
+    flow = []
+    if block.familiarization:
+        qids = [b.add_text("fam_intro", f"<p>{escape(FAMILIARIZATION_INTRO)}</p>")]
+        qids += [b.add_text(s.stimulus_id, b.clip(s), has_video=True) for s in block.familiarization]
+        flow.append(b.block_ref(b.add_block(f"{name} familiarization", qids)))
+    if block.practice_count:
+        copies = math.ceil(block.practice_count / len(block.practice))
+        intro = b.add_block(f"{name} practice intro", [b.add_text("practice_intro", f"<p>{escape(PRACTICE_INTRO)}</p>")])
+        qids = [b.add_video_question(export_tag(s.stimulus_id, c, copies), s)
+                for c in range(1, copies + 1) for s in block.practice]
+        subset = block.practice_count < len(qids)
+        practice = b.add_block(f"{name} practice", qids, "RandomWithOnlyX" if subset else "RandomWithXPerPage",
+                               block.practice_count)
+        flow += [b.block_ref(intro), b.block_ref(practice)]
+    qids = [b.add_video_question(export_tag(s.stimulus_id, rep, repetitions), s) for s, rep in block.tests]
+    flow.append(b.block_ref(b.add_block(f"{name} test", qids, "RandomWithXPerPage")))
+    return flow
+
+
+def _document(b: QsfBuilder, flow: list[dict]) -> dict:
+    sid, p = b.survey_id, b.protocol
+    response_set = qualtrics_id("RS_", b.name)
+    trash = {"Type": "Trash", "Description": "Trash / Unused Questions", "ID": qualtrics_id("BL_", b.name, "trash"),
+             "BlockElements": []}
+
+    def element(kind: str, primary: str, payload, secondary=None, tertiary=None) -> dict:
+        return {"SurveyID": sid, "Element": kind, "PrimaryAttribute": primary, "SecondaryAttribute": secondary,
+                "TertiaryAttribute": tertiary, "Payload": payload}
+
+    entry = {
+        "SurveyID": sid, "SurveyName": p.title or p.name, "SurveyDescription": p.source or None,
+        "SurveyOwnerID": "UR_shapemotion", "SurveyBrandID": "", "DivisionID": None, "SurveyLanguage": "EN",
+        "SurveyActiveResponseSet": response_set, "SurveyStatus": "Inactive", "SurveyStartDate": NEVER,
+        "SurveyExpirationDate": NEVER, "SurveyCreationDate": NEVER, "CreatorID": "UR_shapemotion",
+        "LastModified": NEVER, "LastAccessed": NEVER, "LastActivated": NEVER, "Deleted": None,
+    }
+    options = {
+        "BackButton": "false", "SaveAndContinue": "true", "SurveyProtection": "PublicSurvey",
+        "BallotBoxStuffingPrevention": "true", "NoIndex": "Yes", "SecureResponseFiles": "true",
+        "SurveyExpiration": "None", "SurveyTermination": "DefaultMessage", "Header": "", "Footer": "",
+        "ProgressBarDisplay": "None", "PartialData": "+1 week", "ValidationMessage": "", "PreviousButton": "",
+        "NextButton": " → ", "SurveyTitle": p.title or p.name, "SkinLibrary": "", "SkinType": "MQ", "Skin": "",
+        "NewScoring": 1,
+    }
+    elements = [
+        element("BL", "Survey Blocks", [b.blocks[0], trash] + b.blocks[1:]),
+        element("FL", "Survey Flow", {"Type": "Root", "FlowID": "FL_1", "Flow": flow,
+                                       "Properties": {"Count": b.flow_count, "RemovedFieldsets": []}}),
+        element("PL", "Preview Link", {"PreviewType": "Brand", "PreviewID": qualtrics_id("", b.name, "preview")}),
+        element("RS", response_set, None, "Default Response Set"),
+        element("SCO", "Scoring", {"ScoringCategories": [], "ScoringCategoryGroups": [],
+                                   "ScoringSummaryCategory": None, "ScoringSummaryAfterQuestions": 0,
+                                   "ScoringSummaryAfterSurvey": 0, "DefaultScoringCategory": None,
+                                   "AutoScoringCategory": None}),
+        element("PROJ", "CORE", {"ProjectCategory": "CORE", "SchemaVersion": "1.1.0"}, None, "1.1.0"),
+        element("STAT", "Survey Statistics", {"MobileCompatible": True, "ID": "Survey Statistics"}),
+        element("QC", "Survey Question Count", None, str(len(b.questions))),
+        element("SO", "Survey Options", options),
+    ] + b.questions
+    return {"SurveyEntry": entry, "SurveyElements": elements}
+
+
+def qsf_text(source: SurveySource, video_base_url: str | None = None) -> str:
+    """The QSF file's text: UTF-8 JSON, keys in Qualtrics's order."""
+    return json.dumps(build_qsf(source, video_base_url), indent=2, ensure_ascii=False) + "\n"

@@ -1,0 +1,126 @@
+"""Qualtrics Advanced Format TXT: a plain-text fallback for accounts that cannot import QSF.
+
+The format carries blocks, page breaks, questions (``[[ID:…]]`` sets the export tag), choices and
+embedded data (``[[ED:field:value]]``), but no survey flow, randomisation or JavaScript. Those are
+listed by :func:`manual_steps` (the CLI prints them) and must be set by hand after the import.
+
+The blocks are written group by group (and rotation by rotation), as in the QSF file; a ranking is
+written as a matrix (items × rank) because the format has no rank-order question — its export columns
+(``<tag>_1`` … ``<tag>_k`` = rank of the clip at each position) match a rank-order question's.
+"""
+
+from __future__ import annotations
+
+import math
+
+from stimuli.survey.plan import BlockPlan, GroupPlan, build_plan, export_tag
+from stimuli.survey.qsf import PROTOCOL_FIELD, ROTATION_FIELD
+from stimuli.survey.qsf_questions import NEXT_AFTER_VIEW_JS
+from stimuli.survey.source import SurveySource, clip_url
+from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, answer_labels, consent_html, escape,
+                                 instructions_html, question_html, video_html)
+
+
+def _one_line(html_text: str) -> str:
+    """TXT questions end at a blank line: keep the HTML on one line."""
+    return " ".join(html_text.split())
+
+
+class TxtWriter:
+    def __init__(self, source: SurveySource, base_url: str | None):
+        self.source, self.protocol, self.base_url = source, source.protocol, base_url
+        self.lines = ["[[AdvancedFormat]]", ""]
+
+    def clip(self, stimulus) -> str:
+        p = self.protocol
+        return video_html(clip_url(self.base_url, stimulus.file), p.clip.width, p.clip.height)
+
+    def block(self, name: str) -> None:
+        self.lines += [f"[[Block:{name}]]", ""]
+
+    def page_break(self) -> None:
+        self.lines += ["[[PageBreak]]", ""]
+
+    def text(self, tag: str, html_text: str) -> None:
+        self.lines += ["[[Question:DB]]", f"[[ID:{tag}]]", _one_line(html_text), ""]
+
+    def video_question(self, tag: str, stimulus) -> None:
+        labels = [escape(label) for label in answer_labels(self.protocol)]
+        body = _one_line(question_html(self.protocol) + self.clip(stimulus))
+        if self.protocol.response.type == "ranking":
+            ranks = [f"{i}" for i in range(1, len(labels) + 1)]
+            self.lines += ["[[Question:Matrix]]", f"[[ID:{tag}]]", body, "[[Choices]]", *labels,
+                           "[[Answers]]", *ranks, ""]
+        else:
+            self.lines += ["[[Question:MC:SingleAnswer:Horizontal]]", f"[[ID:{tag}]]", body, "[[Choices]]",
+                           *labels, ""]
+
+
+def txt_text(source: SurveySource, video_base_url: str | None = None) -> str:
+    """The Advanced Format TXT file of ``source``."""
+    w = TxtWriter(source, video_base_url)
+    p = source.protocol
+    w.lines += [f"[[ED:{PROTOCOL_FIELD}:{p.name}]]", ""]
+    w.block("Consent")
+    w.text("consent", consent_html(p))
+    w.block("Instructions")
+    w.text("instructions", instructions_html(p))
+    for plan in build_plan(source):
+        for rotation in plan.rotations:
+            suffix = f" rotation {rotation.index}" if rotation.index is not None else ""
+            for block in rotation.blocks:
+                _write_block(w, f"{plan.label} | {block.label}{suffix}", block)
+    return "\n".join(w.lines).rstrip("\n") + "\n"
+
+
+def _write_block(w: TxtWriter, name: str, block: BlockPlan) -> None:
+    repetitions = w.protocol.repetitions
+    if block.familiarization:
+        w.block(f"{name} familiarization")
+        w.text("fam_intro", f"<p>{escape(FAMILIARIZATION_INTRO)}</p>")
+        for s in block.familiarization:
+            w.page_break()
+            w.text(s.stimulus_id, w.clip(s))
+    if block.practice_count:
+        w.block(f"{name} practice")
+        w.text("practice_intro", f"<p>{escape(PRACTICE_INTRO)}</p>")
+        copies = math.ceil(block.practice_count / len(block.practice))
+        for c in range(1, copies + 1):
+            for s in block.practice:
+                w.page_break()
+                w.video_question(export_tag(s.stimulus_id, c, copies), s)
+    w.block(f"{name} test")
+    for i, (s, rep) in enumerate(block.tests):
+        if i:
+            w.page_break()
+        w.video_question(export_tag(s.stimulus_id, rep, repetitions), s)
+
+
+def manual_steps(source: SurveySource) -> list[str]:
+    """What the TXT import cannot express, to be set in Qualtrics by hand (in this order)."""
+    p = source.protocol
+    plans = build_plan(source)
+    steps = ["Survey flow: keep Consent, then Instructions first."]
+    if len(plans) > 1:
+        fields = ", ".join(source.between)
+        steps.append(f"Survey flow: add a Randomizer (present 1 element, 'Evenly Present Elements' on) with one "
+                     f"Group per between group ({', '.join(g.label for g in plans)}); in each Group set Embedded "
+                     f"Data {fields} to the group's level(s) and put that group's blocks inside.")
+    if any(len(g.rotations) > 1 for g in plans):
+        steps.append(f"Survey flow: inside each group, add a Randomizer (present 1, evenly) with one Group per "
+                     f"rotation ('rotation 0' …); set Embedded Data {ROTATION_FIELD} to its number.")
+    if len(plans[0].rotations[0].blocks) > 1 and p.blocks.order != "fixed":
+        steps.append(f"Survey flow: put each part's blocks (familiarization, practice, test) in a Group and add a "
+                     f"Randomizer presenting all {len(plans[0].rotations[0].blocks)} Groups, evenly "
+                     f"(block order: {p.blocks.order}).")
+    steps.append("Each 'test' block: Block Options > Question Randomization > 'Randomly present … questions "
+                 "per page' with 1 question per page (order is random within the block).")
+    if any(b.practice_count for g in plans for r in g.rotations for b in r.blocks):
+        steps.append("Each 'practice' block: Question Randomization > random order, one question per page "
+                     f"(present {p.practice.per_block} of them).")
+    steps.append("Every question with a clip: Add JavaScript (paste the snippet below) so that Next appears only "
+                 "after the clip has played once; make the answer questions 'Force response'.")
+    if p.response.type == "ranking":
+        steps.append("Ranking questions were imported as matrices (rows = clips A…, columns = rank 1 = best); "
+                     "add validation so that each rank is used once, or change them to Rank Order (drag and drop).")
+    return steps + ["JavaScript for the clip questions:\n" + NEXT_AFTER_VIEW_JS]
