@@ -21,6 +21,7 @@ COMMAND_MODULES = [
     "stimuli.commands.protocol_cmds",
     "analysis.commands",
     "stimuli.commands.bodies_cmd",
+    "stimuli.commands.survey_cmd",
 ]
 
 
