@@ -20,6 +20,7 @@ from stimuli.errors import StimuliError
 COMMAND_MODULES = [
     "stimuli.commands.protocol_cmds",
     "analysis.commands",
+    "analysis.commands_report",
     "stimuli.commands.bodies_cmd",
     "stimuli.commands.survey_cmd",
 ]

@@ -1,0 +1,130 @@
+"""Modern alternatives to the classic ANOVA — reported next to it, clearly labelled as additional.
+
+- :func:`mixed_model`: linear mixed model (statsmodels ``MixedLM``) of the trial-level ratings, full
+  factorial fixed effects (sum-to-zero coding), participant random intercept; Wald χ² per term;
+- :func:`ordinal_model`: cumulative-logit (proportional-odds) model of the Likert ratings
+  (statsmodels ``OrderedModel``), full factorial fixed effects; participants enter only through the
+  factors (statsmodels has no random effects for ordinal models), so it is a fixed-effects check;
+- :func:`choice_gee`: logistic GEE (exchangeable working correlation within participant, robust SEs)
+  of 2AFC choices. The outcome is "chose the first alternatives level" (e.g. NoCOM): the intercept tests
+  the alternatives main effect (METHOD) and each term X tests X × METHOD.
+
+Every function returns a DataFrame with columns ``model, term, df, chi2, p, note``.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from analysis.io_design import DesignInfo
+
+FACTOR_IN_PARAM = re.compile(r"C\((\w+), Sum\)")
+
+
+def _formula_rhs(factors: list[str]) -> str:
+    return " * ".join(f"C({f}, Sum)" for f in factors) if factors else "1"
+
+
+def _trial_data(data: pd.DataFrame, design: DesignInfo, columns: list[str]) -> pd.DataFrame:
+    """Test answers with plain object columns (statsmodels and patsy want numpy dtypes)."""
+    frame = data[~data["practice"].astype(bool)]
+    frame = frame[["participant", *design.between, *design.within, *columns]].copy()
+    for c in ["participant", *design.between, *design.within]:
+        frame[c] = frame[c].astype(str).astype(object)
+    return frame.reset_index(drop=True)
+
+
+def wald_terms(params: pd.Series, cov: pd.DataFrame, model: str, label=None) -> pd.DataFrame:
+    """Joint Wald χ² test of all coefficients of each model term (parameters grouped by their factors)."""
+    groups: dict[tuple, list[str]] = {}
+    for name in params.index:
+        factors = tuple(FACTOR_IN_PARAM.findall(name))
+        if factors:
+            groups.setdefault(factors, []).append(name)
+    rows = []
+    from scipy import stats
+    for factors, names in groups.items():
+        b = params[names].to_numpy()
+        v = cov.loc[names, names].to_numpy()
+        chi2 = float(b @ np.linalg.pinv(v) @ b)
+        rows.append({"model": model, "term": label(factors) if label else ":".join(factors), "df": len(names),
+                     "chi2": chi2, "p": float(stats.chi2.sf(chi2, len(names)))})
+    return pd.DataFrame(rows)
+
+
+def mixed_model(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
+    """Linear mixed model of the ratings: full factorial fixed effects, random intercept per participant."""
+    import statsmodels.formula.api as smf
+
+    frame = _trial_data(data, design, ["rating"]).astype({"rating": float})
+    factors = design.between + design.within
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # convergence chatter; convergence is reported in the note
+        fit = smf.mixedlm(f"rating ~ {_formula_rhs(factors)}", frame, groups=frame["participant"]).fit(
+            reml=True, method=["bfgs", "powell"])
+    fe = fit.fe_params
+    table = wald_terms(fe, fit.cov_params().loc[fe.index, fe.index], "linear mixed model (MixedLM, REML)")
+    table["note"] = (f"random intercept SD {np.sqrt(float(fit.cov_re.iloc[0, 0])):.3f}, residual SD "
+                     f"{np.sqrt(fit.scale):.3f}, converged {bool(fit.converged)}, n = {len(frame)} answers")
+    return table
+
+
+def ordinal_model(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
+    """Cumulative-logit model of the Likert ratings (fixed effects only)."""
+    import patsy
+    from statsmodels.miscmodels.ordinal_model import OrderedModel
+
+    frame = _trial_data(data, design, ["rating"])
+    factors = design.between + design.within
+    X = patsy.dmatrix(f"{_formula_rhs(factors)}", frame, return_type="dataframe").drop(columns="Intercept")
+    y = pd.Series(pd.Categorical(frame["rating"].astype(int), categories=range(1, design.k + 1), ordered=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = OrderedModel(y, X, distr="logit").fit(method="bfgs", disp=False, maxiter=5000)
+    params = fit.params[X.columns]
+    cov = fit.cov_params().loc[X.columns, X.columns]
+    table = wald_terms(params, cov, "ordinal (cumulative logit) model")
+    table["note"] = (f"fixed effects only (no participant random effect); converged "
+                     f"{bool(fit.mle_retvals.get('converged', False))}, n = {len(frame)} answers")
+    return table
+
+
+def choice_gee(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
+    """Logistic GEE of 2AFC choices; terms are reported as their interaction with the alternatives factor."""
+    import statsmodels.api as sm
+    import statsmodels.formula.api as smf
+
+    alt = design.alternatives
+    first = alt.levels[0]
+    frame = _trial_data(data, design, ["chosen"])
+    frame["first"] = (frame["chosen"].astype(str) == first).astype(float)
+    factors = design.between + design.within
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = smf.gee(f"first ~ {_formula_rhs(factors)}", "participant", frame, family=sm.families.Binomial(),
+                      cov_struct=sm.cov_struct.Exchangeable()).fit()
+    params, cov = fit.params, fit.cov_params()
+    table = wald_terms(params, cov, "logistic GEE (exchangeable, robust SE)",
+                       label=lambda fs: ":".join([*fs, alt.name]))
+    from scipy import stats
+    z = float(params["Intercept"] / np.sqrt(cov.loc["Intercept", "Intercept"]))
+    intercept = pd.DataFrame([{"model": table["model"].iloc[0] if len(table) else "logistic GEE", "term": alt.name,
+                               "df": 1, "chi2": z * z, "p": float(stats.chi2.sf(z * z, 1))}])
+    table = pd.concat([intercept, table], ignore_index=True)
+    odds = float(np.exp(params["Intercept"]))
+    table["note"] = (f"outcome: chose {first}; odds {odds:.2f} at the grand mean "
+                     f"(P = {odds / (1 + odds):.3f}); n = {len(frame)} answers")
+    return table
+
+
+def additional_models(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
+    """All additional models that fit the design's response type (empty for rankings/k-AFC votes)."""
+    if design.response_type == "likert":
+        return pd.concat([mixed_model(data, design), ordinal_model(data, design)], ignore_index=True)
+    if design.response_type == "afc" and len(design.alternatives.levels) == 2:
+        return choice_gee(data, design)
+    return pd.DataFrame(columns=["model", "term", "df", "chi2", "p", "note"])

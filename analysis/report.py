@@ -1,0 +1,258 @@
+"""``shapemotion analyze``: responses + design directory → tables, figures, exclusions and one ``report.html``.
+
+Steps: import (explicit exclusions) → the design's dependent measure → the protocol's analysis (mixed /
+repeated-measures ANOVA with Tukey post-hoc for Likert and 2AFC designs; χ², Friedman and binomial
+tests for k-AFC votes and rankings) → paper-style tables (md, tex, csv, html, json) → figures (PNG, SVG,
+PDF) → the additional modern models → ``report.html`` (self-contained: figures inlined as PNG data).
+Everything is written into a staging folder and moved into place at the end, so an error leaves no
+partial report.
+
+>>> analyze("design_dir", "responses.csv", "report_dir")      # doctest: +SKIP
+{'imported_rows': 16, ...}
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import json
+import platform
+import shutil
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+from analysis.errors import AnalysisError
+from analysis.io_design import DesignInfo, load_design
+from analysis.io_files import replace_directory
+from analysis.measures import (anova_input, binomial_first, chi2_votes, friedman, percent_chosen, rank_points,
+                               vote_counts)
+from analysis.responses import ImportResult, import_responses
+
+TABLE_FORMATS = ("md", "tex", "csv", "html", "json")
+MAX_INTERACTION_FIGURES = 8
+
+
+def analyze(design_dir: str | Path, responses: str | Path, out: str | Path, models: bool = True) -> dict:
+    """Run the whole analysis; returns the summary written to ``summary.json``."""
+    design = load_design(design_dir)
+    imported = import_responses(responses, design)
+    if imported.data.empty or (~imported.data["practice"]).sum() == 0:
+        raise AnalysisError(f"{responses}: no participant is left after the exclusions "
+                            f"({imported.summary()['excluded_by_reason']}); nothing to analyse")
+    out = Path(out)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent if out.parent.exists() else None))
+    try:
+        context = _write_all(design, imported, staging, models)
+        replace_directory(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return context["summary"]
+
+
+def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bool) -> dict:
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    imported.data.to_csv(out / "responses_tidy.csv", index=False, lineterminator="\n")
+    imported.exclusions.to_csv(out / "exclusions.csv", index=False, lineterminator="\n")
+    sections = []
+    if design.dependent_measure in ("mean_rating", "percent_chosen"):
+        sections.append(_anova_section(design, imported.data, out))
+    elif design.dependent_measure == "votes":
+        sections.append(_votes_section(design, imported.data, out))
+    else:
+        sections.append(_ranking_section(design, imported.data, out))
+    if models:
+        section = _models_section(design, imported.data, out)
+        if section:
+            sections.append(section)
+    summary = {"import": imported.summary(), "design": _design_summary(design),
+               "sections": [{k: v for k, v in s.items() if k in ("title", "results")} for s in sections]}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, ensure_ascii=False, default=_plain) + "\n")
+    context = {"summary": summary, "sections": sections, "imported": imported, "design": design,
+               "exclusions": imported.exclusions.fillna("").to_dict("records"), "versions": software_versions()}
+    (out / "report.html").write_text(render_report(context, out), encoding="utf-8")
+    return context
+
+
+def _plain(value):
+    if hasattr(value, "item"):
+        return value.item()
+    return str(value)
+
+
+# -- sections -------------------------------------------------------------------------------------------
+
+def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
+    """The classic analysis: ANOVA of the cell values, Tukey post-hoc, paper-style tables, figures."""
+    from analysis.anova import anova
+    from analysis.posthoc import tukey_all
+    from analysis.tables import render
+
+    from analysis import figures
+    ai = anova_input(data, design)
+    ai.data.to_csv(out / "cell_values.csv", index=False, lineterminator="\n")
+    table = anova(ai.data, ai.dv, "participant", ai.within, ai.between, alpha=design.alpha)
+    table = _testable(table, design)
+    abbreviations = {f.name: f.abbreviations for f in design.factors if f.abbreviations}
+    tukey_all(table, abbreviations=abbreviations, alpha=design.alpha)
+    for fmt in TABLE_FORMATS:
+        (out / f"anova.{fmt}").write_text(render(table, fmt), encoding="utf-8")
+    (out / "anova_all.md").write_text(render(table, "md", all_rows=True), encoding="utf-8")
+    figs = []
+    if any(f.maps_to == "body" for f in design.factors) and any(f.maps_to == "motion" for f in design.factors) \
+            and design.response_type == "likert":
+        figs.append(("Figure 4 style: mean rating per BODY × MOTION", figures.figure4(ai.data, design,
+                                                                                      out / "figures" / "figure4")))
+    if design.response_type == "afc":
+        figs.append((f"Figure 9 style: % of trials each {design.alternatives.name} was chosen",
+                     figures.figure9(ai.data, design, out / "figures" / "figure9")))
+    for effect in table.significant()[:MAX_INTERACTION_FIGURES]:
+        factors = list(table.effects.loc[effect, "factors"])
+        stem = out / "figures" / ("effect_" + "_".join(factors))
+        figs.append((f"{' × '.join(factors)} (significant)",
+                     figures.interaction_plot(ai.data, ai.dv, factors, design, stem)))
+    significant = table.significant()
+    results = {"dv": ai.dv, "within": ai.within, "between": ai.between, "significant": significant,
+               "effects": json.loads(table.to_json()),
+               "posthoc": {e: table.posthoc[e].summary for e in table.posthoc}}
+    (out / "anova_summary.json").write_text(json.dumps(results, indent=2, ensure_ascii=False) + "\n")
+    kind = "Mixed" if ai.between else "Repeated-measures"
+    return {"title": f"{kind} ANOVA of {ai.dv} (the paper's analysis)", "html": render(table, "html"),
+            "note": _anova_note(design), "figures": figs, "results": results,
+            "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova_all.md", "cell_values.csv"]}
+
+
+def _testable(table, design: DesignInfo):
+    """Drop effects a constant-sum measure cannot test (those without the alternatives factor)."""
+    if design.response_type == "likert":
+        return table
+    alt = design.alternatives.name
+    keep = [e for e in table.effects.index if alt in table.effects.loc[e, "factors"]]
+    return dataclasses.replace(table, effects=table.effects.loc[keep])
+
+
+def _anova_note(design: DesignInfo) -> str:
+    if design.response_type == "likert":
+        return ("Ratings averaged over repetitions per participant and cell; Tukey HSD over all pairs of the "
+                "cell means of each significant effect (its own error term). Observed power is a function of "
+                "p and says nothing beyond it.")
+    return (f"Percentage of trials each {design.alternatives.name} level was chosen per participant and cell. "
+            f"The levels' percentages sum to 100 in every cell, so only effects that involve "
+            f"{design.alternatives.name} are testable and shown.")
+
+
+def _votes_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
+    """k-AFC votes: counts per alternative, χ² goodness of fit overall and per cell, binomial for the top level."""
+    from analysis import figures
+    alt = design.alternatives
+    overall = vote_counts(data, design)
+    per_cell = vote_counts(data, design, by=design.within) if design.within else overall
+    per_cell.to_csv(out / "votes.csv", lineterminator="\n")
+    tests = [{"cell": "all", **chi2_votes(overall.iloc[0].to_numpy())}]
+    for cell, row in (per_cell.iterrows() if design.within else []):
+        tests.append({"cell": str(cell), **chi2_votes(row.to_numpy())})
+    top = overall.iloc[0].idxmax()
+    binom = binomial_first(int(overall.iloc[0][top]), int(overall.iloc[0].sum()), len(alt.levels), top)
+    tests_frame = pd.DataFrame(tests)
+    tests_frame.to_csv(out / "vote_tests.csv", index=False, lineterminator="\n")
+    shares = percent_chosen(data, design)
+    figs = [(f"% of votes per {alt.name}", figures.choice_bars(shares, "percent", design,
+                                                                out / "figures" / "votes", "% of votes",
+                                                                100.0 / len(alt.levels)))]
+    html = _frame_html(overall, f"Votes per {alt.name} (all trials)") + \
+        _frame_html(tests_frame.round(4), "χ² goodness of fit against equal shares") + \
+        _frame_html(pd.DataFrame([binom]).round(4), f"Binomial test: {top} chosen more often than 1/{len(alt.levels)}")
+    results = {"votes": overall.iloc[0].to_dict(), "chi2": tests, "binomial": binom}
+    return {"title": f"k-AFC votes per {alt.name}", "html": html, "figures": figs, "results": results,
+            "note": "Vote counts are analysed with χ² goodness of fit (equal shares under chance).",
+            "files": ["votes.csv", "vote_tests.csv"]}
+
+
+def _ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
+    """Rankings: points (k … 1), Friedman test, binomial test of 'ranked first' per level."""
+    from analysis import figures
+    alt = design.alternatives
+    points = rank_points(data, design)
+    points.to_csv(out / "rank_points.csv", index=False, lineterminator="\n")
+    fried = friedman(points, design)
+    firsts = points.groupby(alt.name)["first"].sum().reindex(alt.levels)
+    n_rankings = int((~data["practice"]).sum())
+    binomials = [binomial_first(int(firsts[lv]), n_rankings, len(alt.levels), lv) for lv in alt.levels]
+    totals = points.groupby(alt.name)["points"].sum().reindex(alt.levels).rename("total points").to_frame()
+    totals["mean points"] = points.groupby(alt.name)["points"].mean().reindex(alt.levels)
+    totals["ranked first"] = firsts
+    figs = [(f"Mean rank points per {alt.name}", figures.choice_bars(points, "points", design,
+                                                                      out / "figures" / "rank_points",
+                                                                      "mean points", (len(alt.levels) + 1) / 2))]
+    html = _frame_html(totals.round(3), f"Rank points per {alt.name} ({len(alt.levels)} for first … 1 for last)") + \
+        _frame_html(pd.DataFrame([{k: v for k, v in fried.items() if k != 'mean_points'}]).round(4),
+                    "Friedman test over participants") + \
+        _frame_html(pd.DataFrame(binomials).round(4), "Binomial tests: ranked first more often than chance")
+    results = {"totals": totals.reset_index().to_dict("records"), "friedman": fried, "binomial": binomials}
+    return {"title": f"Rankings of {alt.name}", "html": html, "figures": figs, "results": results,
+            "note": "Points: k for first place … 1 for last (the thesis scored 4/3/2/1).",
+            "files": ["rank_points.csv"]}
+
+
+def _models_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict | None:
+    from analysis.models import additional_models
+    table = additional_models(data, design)
+    if table.empty:
+        return None
+    table.to_csv(out / "additional_models.csv", index=False, lineterminator="\n")
+    shown = table.assign(chi2=table["chi2"].round(3), p=table["p"].map(lambda p: f"{p:.4f}"))
+    html = "".join(_frame_html(g.drop(columns=["model", "note"]), f"{model} — {g['note'].iloc[0]}", index=False)
+                   for model, g in shown.groupby("model", sort=False))
+    return {"title": "Additional analyses (modern alternatives, not in the paper)", "html": html, "figures": [],
+            "note": "Wald χ² tests per term. These complement the classic ANOVA above; they are not the paper's "
+                    "analysis.",
+            "results": {"terms": table.to_dict("records")}, "files": ["additional_models.csv"]}
+
+
+def _frame_html(frame: pd.DataFrame, caption: str, index: bool = True) -> str:
+    import html as html_lib
+    body = frame.to_html(index=index, border=0, classes="result", na_rep="")
+    return f"<figure class=\"table\"><figcaption>{html_lib.escape(caption)}</figcaption>{body}</figure>\n"
+
+
+# -- report ---------------------------------------------------------------------------------------------
+
+def _design_summary(design: DesignInfo) -> dict:
+    return {"name": design.protocol.get("name", ""), "participants_planned": design.participants,
+            "seed": design.seed, "response": design.response_type, "labels": design.labels, "k": design.k,
+            "dependent_measure": design.dependent_measure, "alpha": design.alpha,
+            "factors": [{"name": f.name, "role": f.role, "levels": f.levels} for f in design.factors]}
+
+
+def software_versions() -> dict:
+    """Versions of the libraries the numbers depend on (no timestamps: reports stay reproducible)."""
+    import matplotlib
+    import numpy
+    import scipy
+    import statsmodels
+    return {"shapemotion": "0.1.0", "python": platform.python_version(), "numpy": numpy.__version__,
+            "scipy": scipy.__version__, "pandas": pd.__version__, "statsmodels": statsmodels.__version__,
+            "matplotlib": matplotlib.__version__}
+
+
+def render_report(context: dict, out: Path) -> str:
+    """The self-contained ``report.html`` (figures inlined as base64 PNG)."""
+    import jinja2
+
+    from analysis.tables import TEMPLATE_DIR
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATE_DIR)), autoescape=True,
+                             trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+    sections = []
+    for s in context["sections"]:
+        figs = [{"caption": caption, "png": _data_uri(next(p for p in paths if p.suffix == ".png")),
+                 "files": [str(p.relative_to(out)) for p in paths]} for caption, paths in s["figures"]]
+        sections.append({**s, "figures": figs, "html": jinja2.utils.markupsafe.Markup(s["html"])})
+    return env.get_template("report.html.j2").render(
+        summary=context["summary"], sections=sections, exclusions=context["exclusions"],
+        versions=context["versions"], design=context["summary"]["design"], imported=context["summary"]["import"])
+
+
+def _data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
