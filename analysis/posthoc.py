@@ -63,8 +63,8 @@ def abbreviate(factor: str, level: str, abbreviations: dict | None) -> str:
     if not abbreviations:
         return level
     per_factor = abbreviations.get(factor)
-    if isinstance(per_factor, dict):
-        return str(per_factor.get(level, level))
+    if isinstance(per_factor, dict) and level in per_factor:
+        return str(per_factor[level])
     v = abbreviations.get(level)
     return level if v is None or isinstance(v, dict) else str(v)
 
