@@ -108,10 +108,13 @@
   function ranking(trial) {
     var labels = cfg.response.labels, picked = [], steps = [];
     function remaining() { return labels.filter(function (l) { return picked.indexOf(l) < 0; }); }
+    function remainingHtml() {   // what the buttons show: the escaped labels of the clips not yet picked
+      return remaining().map(function (l) { return cfg.response.labels_html[labels.indexOf(l)]; });
+    }
     for (var step = 1; step < labels.length; step++) {
       (function (step) {
         var last = step === labels.length - 1;
-        steps.push(videoTrial(trial, function () { return remaining(); }, {
+        steps.push(videoTrial(trial, function () { return remainingHtml(); }, {
           prompt: cfg.text.question + "<p>" + cfg.text.rank_step.replace("{k}", String(step)) + "</p>",
           response_allowed_while_playing: step > 1,
           on_start: function () { if (step === 1) { picked = []; } },
