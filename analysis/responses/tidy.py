@@ -40,7 +40,7 @@ def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int]
         else:
             kept.append(a)
     kept = _number_repetitions(kept, trialwise)
-    kept = _drop_duplicates(kept, drop)
+    kept = _drop_duplicates(kept, drop, design.repetitions, stimuli)
     scored = []
     for a in kept:
         try:
@@ -78,10 +78,15 @@ def _number_repetitions(answers: list[Answer], trialwise: bool) -> list[Answer]:
     return answers
 
 
-def _drop_duplicates(answers: list[Answer], drop) -> list[Answer]:
+def _drop_duplicates(answers: list[Answer], drop, repetitions: int, stimuli: pd.DataFrame) -> list[Answer]:
+    """Same participant, stimulus and repetition twice, or more showings of a test clip than the design has."""
     first: dict[tuple, int] = {}
     out = []
     for a in sorted(answers, key=lambda a: a.row):
+        if a.repetition > repetitions and not stimuli.loc[a.stimulus_id, "practice"]:
+            drop(a, "duplicate answer", f"participant {a.participant!r} answered {a.stimulus_id} {a.repetition} "
+                                        f"times; the design shows it {repetitions} time(s)")
+            continue
         key = (a.participant, a.stimulus_id, a.repetition)
         if key in first and first[key] != a.row:
             drop(a, "duplicate answer", f"participant {a.participant!r} already answered {a.stimulus_id} "

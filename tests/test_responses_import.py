@@ -1,0 +1,169 @@
+"""Response import on hand-written exports (tests/data/responses/README.md lists what each file exercises)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from analysis.errors import AnalysisError
+from analysis.io_design import load_design
+from analysis.measures import anova_input
+from analysis.responses import import_responses, read_response_file
+from analysis.responses.inspect import inspect_file
+
+DATA = Path(__file__).parent / "data" / "responses"
+P01 = {("walk", "Hi1"): 2.5, ("walk", "Lo1"): 4.5, ("jog", "Hi1"): 1.5, ("jog", "Lo1"): 4.0}
+P02 = {("walk", "Hi1"): 4.5, ("walk", "Lo1"): 2.0, ("jog", "Hi1"): 3.5, ("jog", "Lo1"): 2.0}
+
+
+@pytest.fixture(scope="module")
+def likert():
+    return load_design(DATA / "mini_likert")
+
+
+@pytest.fixture(scope="module")
+def afc():
+    return load_design(DATA / "mini_afc")
+
+
+def cell_means(result, design) -> dict:
+    frame = anova_input(result.data, design).data
+    return {(r["participant"], r["GAIT"], r["BODY"]): r["rating"] for r in frame.to_dict("records")}
+
+
+def expected_means(**people) -> dict:
+    return {(p, g, b): v for p, cells in people.items() for (g, b), v in cells.items()}
+
+
+def test_qualtrics_3row_choice_text_german_question_text(likert):
+    result = import_responses(DATA / "qualtrics_likert_text.csv", likert)
+    assert result.format == "qualtrics"
+    assert (result.n_rows, result.n_imported_rows, result.n_excluded_rows) == (3, 2, 1)
+    assert result.reconciles
+    excluded = result.exclusions.dropna(subset=["row"])
+    assert excluded[["row", "participant", "reason"]].values.tolist() == [[6, "p03", "unfinished"]]
+    assert "Progress = 40" in excluded["detail"].iloc[0]
+    assert cell_means(result, likert) == expected_means(p01=P01, p02=P02)
+    # the practice answer is imported and flagged, not counted in the cells
+    practice = result.data[result.data["practice"]]
+    assert practice[["participant", "stimulus_id", "rating"]].values.tolist() == [
+        ["p01", "practice-F-walk-P1", 3], ["p02", "practice-M-walk-P1", 2]]
+
+
+def test_display_order_columns_give_the_presentation_order(likert):
+    result = import_responses(DATA / "qualtrics_likert_text.csv", likert)
+    p01 = result.data[result.data["participant"] == "p01"].sort_values("trial")
+    trials = likert.trials[likert.trials["participant"] == "1"]
+    assert p01[["stimulus_id", "repetition"]].astype(str).values.tolist() == \
+        trials[["stimulus_id", "repetition"]].values.tolist()
+    assert p01["trial"].tolist() == list(range(1, 10))
+
+
+def test_numeric_export_and_legacy_export_equal_the_text_export(likert):
+    text = import_responses(DATA / "qualtrics_likert_text.csv", likert)
+    numeric = import_responses(DATA / "qualtrics_likert_numeric.csv", likert)
+    legacy = import_responses(DATA / "qualtrics_legacy.csv", likert)
+    assert legacy.format == "qualtrics-legacy" and numeric.format == "qualtrics"
+    cols = ["participant", "stimulus_id", "repetition", "rating"]
+    key = ["participant", "stimulus_id", "repetition"]
+    for other in (numeric, legacy):
+        pd.testing.assert_frame_equal(other.data[cols].sort_values(key).reset_index(drop=True),
+                                      text.data[cols].sort_values(key).reset_index(drop=True))
+    assert numeric.exclusions.dropna(subset=["row"])["reason"].tolist() == ["unfinished"]
+    assert legacy.n_excluded_rows == 0 and legacy.n_rows == 2
+
+
+def test_afc_left_right_choice_text_maps_to_the_chosen_method(afc):
+    result = import_responses(DATA / "qualtrics_afc_text.csv", afc)
+    assert result.reconciles and result.n_imported_rows == 2
+    chosen = {(r["participant"], r["stimulus_id"]): r["chosen"] for r in result.data.to_dict("records")}
+    p1 = "R_afc0001aaaaaa"
+    assert chosen[(p1, "walk-Hi1-NoCOM_COM")] == "NoCOM"      # Left, NoCOM on the left
+    assert chosen[(p1, "walk-Hi1-COM_NoCOM")] == "NoCOM"      # Right, NoCOM on the right
+    assert chosen[(p1, "walk-Lo1-NoCOM_COM")] == "COM"
+    assert chosen[(p1, "jog-Hi1-COM_NoCOM")] == "COM"
+    pct = anova_input(result.data, afc).data
+    nocom = pct[pct["METHOD"] == "NoCOM"].set_index(["participant", "GAIT", "BODY"])["percent"].to_dict()
+    assert nocom == {(p1, "walk", "Hi1"): 100.0, (p1, "walk", "Lo1"): 50.0, (p1, "jog", "Hi1"): 50.0,
+                     (p1, "jog", "Lo1"): 100.0, **{("R_afc0002bbbbbb", g, b): 50.0
+                                                   for g in ("walk", "jog") for b in ("Hi1", "Lo1")}}
+    assert (pct.groupby(["participant", "GAIT", "BODY"])["percent"].sum() == 100.0).all()
+
+
+def test_corrupted_export_lists_every_row_with_its_reason(likert):
+    result = import_responses(DATA / "qualtrics_corrupt.csv", likert)
+    assert result.n_rows == 8 and result.reconciles
+    rows = result.exclusions.dropna(subset=["row"])
+    assert dict(zip(rows["row"], rows["reason"])) == {
+        5: "duplicate participant id", 6: "answer outside the scale", 7: "missing cells",
+        8: "survey preview or test", 9: "malformed row", 10: "several between-subject groups"}
+    assert sorted(result.data["participant"].unique()) == ["p01", "p09"]
+    columns = result.exclusions[result.exclusions["row"].isna()]
+    assert columns[["reason", "column"]].values.tolist() == [["unknown export tag", "Q99"]]
+    assert "'7' is outside 1…5" in rows.set_index("row").loc[6, "detail"]
+    assert "1 of 4 design cells" in rows.set_index("row").loc[7, "detail"]
+
+
+def test_jspsych_csv_unfinished_participant_and_non_trial_rows(likert):
+    result = import_responses(DATA / "jspsych_likert.csv", likert)
+    assert result.format == "jspsych-csv"
+    assert (result.n_rows, result.n_imported_rows, result.n_excluded_rows) == (14, 9, 5)
+    reasons = result.exclusions["reason"].value_counts().to_dict()
+    assert reasons == {"not a stimulus trial": 2, "unfinished": 3}
+    assert cell_means(result, likert) == expected_means(p01=P01)
+    first = result.data.sort_values("trial").iloc[0]
+    assert (first["stimulus_id"], first["rating"], first["rt"]) == ("F-jog-Lo1", 4, pytest.approx(2.301))
+
+
+def test_long_csv_excludes_single_answers_and_duplicates(afc):
+    result = import_responses(DATA / "long_afc.csv", afc)
+    assert result.format == "long"
+    assert (result.n_rows, result.n_imported_rows, result.n_excluded_rows) == (17, 15, 2)
+    rows = result.exclusions.set_index("row")
+    assert rows.loc[6, "reason"] == "answer outside the scale"
+    assert rows.loc[18, "reason"] == "duplicate answer"
+    pct = anova_input(result.data, afc).data
+    a = pct[(pct["participant"] == "A") & (pct["METHOD"] == "NoCOM")].set_index(["GAIT", "BODY"])["percent"]
+    assert a.to_dict() == {("jog", "Hi1"): 0.0, ("jog", "Lo1"): 100.0, ("walk", "Hi1"): 100.0, ("walk", "Lo1"): 0.0}
+
+
+@pytest.mark.parametrize("name, message", [
+    ("bad_binary.xlsx", "not a text file"),
+    ("bad_latin1.csv", "not UTF-8"),
+    ("bad_no_header.csv", "no recognisable header"),
+    ("bad_empty.csv", "empty"),
+    ("bad_utf16.csv", "UTF-16"),
+    ("does_not_exist.csv", "not found"),
+])
+def test_bad_files_raise_a_clear_error(name, message, likert):
+    with pytest.raises(AnalysisError, match=message) as info:
+        import_responses(DATA / name, likert)
+    assert name in str(info.value)
+
+
+def test_format_detection():
+    assert read_response_file(DATA / "qualtrics_legacy.csv").format == "qualtrics-legacy"
+    raw = read_response_file(DATA / "qualtrics_likert_text.csv")
+    assert raw.format == "qualtrics" and raw.row_numbers == [4, 5, 6]
+    assert raw.question_text[17].startswith("Wie stimmig")
+
+
+def test_inspect_reports_format_counts_and_question_text():
+    info = inspect_file(DATA / "qualtrics_likert_text.csv")
+    assert (info["format"], info["responses"], info["unfinished"]) == ("qualtrics", 3, 1)
+    kinds = {c["name"]: c["kind"] for c in info["columns"]}
+    assert kinds["Finished"] == "metadata" and kinds["F_walk_DO"] == "display order"
+    assert kinds["F-walk-Hi1_r1"] == "question"
+    text = {c["name"]: c["question_text"] for c in info["columns"]}
+    assert text["M-jog-Lo1_r2"] == "Wie stimmig ist die Bewegung mit der Körperform der Figur? - M-jog-Lo1_r2"
+
+
+def test_cli_inspect_and_bad_file_exit_code(run_cli):
+    code, out, _ = run_cli("responses", "inspect", str(DATA / "qualtrics_legacy.csv"))
+    assert code == 0 and "format: qualtrics-legacy" in out and "responses: 2" in out
+    code, out, _ = run_cli("responses", "inspect", str(DATA / "jspsych_likert.csv"), "--json")
+    assert code == 0 and '"responses": 11' in out
+    code, _, err = run_cli("responses", "inspect", str(DATA / "bad_binary.xlsx"))
+    assert code == 2 and "not a text file" in err and "Traceback" not in err
