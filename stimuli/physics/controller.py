@@ -1,0 +1,120 @@
+"""The paper's controller: PD joint torques plus PD world force and torque on the root.
+
+Joint torques ``τ = k_p (q̄ − q) − k_d q̇`` are MuJoCo position actuators (``kp``, ``kv``), one per
+DoF. Per DoF the gains are ``k_p · I_j`` and ``k_d · I_j`` where ``I_j`` is the base character's
+joint-space inertia at that DoF in the rest pose (diagonal of MuJoCo's mass matrix: what the DoF
+has to swing), so that one pair of scalars suits hips and wrists alike. The root gets a world force
+``F = k_pf (p̄ − p) + k_df (v̄ − v)`` and torque ``T = k_pr θ(R̄ Rᵀ) + k_dr (ω̄ − ω)`` on the
+pelvis (the paper's k_pf, k_df; the velocity terms use the reference velocity because the root
+travels at walking speed). All gains are found once for the base character
+(:mod:`stimuli.physics.tune`), stored in ``gains.json`` as absolute values and then kept fixed for
+every body, as the paper did: heavier or lighter segments then follow the same motion differently.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+from stimuli.errors import StimuliError
+
+GAINS_FILE = Path(__file__).with_name("gains.json")
+
+
+@dataclasses.dataclass
+class Gains:
+    """Controller gains (SI units); ``profile`` is the base character's per-DoF inertia (kg·m²)."""
+
+    k_p: float
+    k_d: float
+    k_pf: float
+    k_df: float
+    k_pr: float
+    k_dr: float
+    profile: dict[str, float]
+    base: dict = dataclasses.field(default_factory=dict)
+    tuning: dict = dataclasses.field(default_factory=dict)
+
+    def joint_gains(self, dof_names: list[str]) -> tuple[dict[str, float], dict[str, float]]:
+        """Absolute kp, kd per DoF (N·m/rad, N·m·s/rad)."""
+        missing = [d for d in dof_names if d not in self.profile]
+        if missing:
+            raise StimuliError(f"{GAINS_FILE}: no gain for DoF {', '.join(missing)}")
+        return ({d: self.k_p * self.profile[d] for d in dof_names},
+                {d: self.k_d * self.profile[d] for d in dof_names})
+
+    def save(self, path: Path = GAINS_FILE) -> Path:
+        path.write_text(json.dumps(dataclasses.asdict(self), indent=1, sort_keys=True) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path: Path = GAINS_FILE) -> "Gains":
+        try:
+            return cls(**json.loads(Path(path).read_text()))
+        except (OSError, ValueError, TypeError) as exc:
+            raise StimuliError(f"{path}: cannot read controller gains ({exc}); run `shapemotion physics tune`") from None
+
+
+def inertia_profile(model, stance_weight: float = 0.1) -> dict[str, float]:
+    """Per-DoF inertia (kg·m²) the PD gains scale with, at the rest pose.
+
+    Swing: the diagonal of the joint-space inertia matrix (what the DoF moves when the body is
+    free). Legs also carry the body in stance: for hip, knee and ankle DoFs the rest of the body's
+    inertia about the joint (point masses of the segments not below it), times ``stance_weight``,
+    is added, otherwise gravity bends a stance ankle whose own foot is light.
+    """
+    import mujoco
+
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, full)
+    out = {}
+    for a in range(model.nu):
+        joint = model.actuator_trnid[a, 0]
+        name = model.actuator(a).name
+        value = float(full[model.jnt_dofadr[joint], model.jnt_dofadr[joint]])
+        if name.split(".")[0].split(":")[0] in ("hip", "knee", "ankle"):
+            below = _subtree(model, model.jnt_bodyid[joint])
+            rest = [b for b in range(1, model.nbody) if b not in below]
+            d2 = np.sum((data.xipos[rest] - data.xanchor[joint]) ** 2, axis=1)
+            value += stance_weight * float(np.sum(model.body_mass[rest] * d2))
+        out[name] = value
+    return out
+
+
+def _subtree(model, body: int) -> set[int]:
+    """Indices of ``body`` and all bodies below it."""
+    out = {body}
+    for b in range(body + 1, model.nbody):
+        if model.body_parentid[b] in out:
+            out.add(b)
+    return out
+
+
+def set_joint_gains(model, kp: dict[str, float], kd: dict[str, float]) -> None:
+    """Write PD gains into a compiled model's position actuators (no recompilation)."""
+    for a in range(model.nu):
+        name = model.actuator(a).name
+        model.actuator_gainprm[a, 0] = kp[name]
+        model.actuator_biasprm[a, 1] = -kp[name]
+        model.actuator_biasprm[a, 2] = -kd[name]
+
+
+def root_wrench(gains: Gains, pos, vel, quat_wxyz, omega_world, target: dict, i: int) -> np.ndarray:
+    """World force and torque (6,) on the pelvis for step ``i`` of the sampled targets.
+
+    Uses MuJoCo's quaternion helpers: this runs every simulation step, scipy's are 20× slower.
+    """
+    import mujoco
+
+    force = gains.k_pf * (target["root_pos"][i] - pos) + gains.k_df * (target["root_vel"][i] - vel)
+    inv, err_q, err = np.empty(4), np.empty(4), np.empty(3)
+    mujoco.mju_negQuat(inv, quat_wxyz)
+    mujoco.mju_mulQuat(err_q, target["root_quat"][i], inv)
+    mujoco.mju_quat2Vel(err, err_q, 1.0)
+    torque = gains.k_pr * err + gains.k_dr * (target["root_omega"][i] - omega_world)
+    return np.concatenate([force, torque])

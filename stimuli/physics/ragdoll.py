@@ -1,0 +1,257 @@
+"""The ragdoll: rigid segments of a fitted body, joints at its rig joints, as MuJoCo MJCF.
+
+Fifteen rigid bodies (the segment table of ``Body.segments``): pelvis (free root), spine, head,
+and per side upper arm, lower arm, hand, upper leg, lower leg, foot. Shapes: capsules for the limbs,
+trunk and pelvis (radius from the segment's mesh volume), a sphere for the head, a box for each
+foot (fitted to the mesh vertices below the ankle) which is the only shape that touches the ground.
+Joints (12, 28 DoF): spine, neck, shoulders, hips and ankles are three hinges each (Euler angles,
+so MuJoCo's PD position actuators apply), elbows and knees one hinge each; the hands are welded to
+the forearms. The paper's ragdoll (Unity) has 10 joints and 22 DoF; we add the two ankles
+(3 DoF each) so that the feet can roll over the ground.
+
+Every body frame is parallel to the world axes in the rest pose and sits at its joint, so a body's
+world rotation *is* the rest-relative global rotation of the motion's bone it stands for
+(``Body.rig`` pose semantics: rotations relative to the rest pose, expressed in world axes).
+Inertial properties come from :mod:`stimuli.physics.inertia` (Table 1), set explicitly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from stimuli.physics import inertia
+
+# label, parent, joint kind, joint anchor (Anny bone head, "{s}" = side), the Anny bone whose
+# global rotation the body follows, Euler order of the 3-hinge joints (middle axis = the one that
+# moves least in gait, away from gimbal lock).
+LAYOUT = (
+    ("pelvis", None, "free", "root", "root", None),
+    ("spine", "pelvis", "ball", "spine04", "spine03", "XZY"),
+    ("head", "spine", "ball", "neck01", "head", "XZY"),
+    ("upper_arm.{s}", "spine", "ball", "upperarm01.{s}", "upperarm02.{s}", "XZY"),
+    ("lower_arm.{s}", "upper_arm.{s}", "hinge", "lowerarm01.{s}", "lowerarm01.{s}", None),
+    ("hand.{s}", "lower_arm.{s}", "weld", "wrist.{s}", None, None),
+    ("upper_leg.{s}", "pelvis", "ball", "upperleg01.{s}", "upperleg02.{s}", "XZY"),
+    ("lower_leg.{s}", "upper_leg.{s}", "hinge", "lowerleg01.{s}", "lowerleg01.{s}", None),
+    ("foot.{s}", "lower_leg.{s}", "ball", "foot.{s}", "foot.{s}", "XZY"),
+)
+FOOT_FRICTION = 1.0
+ARMATURE = 0.01  # kg·m² added to every hinge: keeps light segments stable at a 1 ms step
+
+
+@dataclasses.dataclass
+class Link:
+    """One rigid body of the ragdoll (project frame, rest pose)."""
+
+    label: str
+    parent: str | None
+    kind: str
+    anchor: np.ndarray
+    bone: str | None
+    euler: str | None
+    mass: inertia.SegmentMass
+    geom: dict
+    inertia: np.ndarray
+    inertia_quat: np.ndarray
+    hinge_axis: np.ndarray | None = None
+
+    @property
+    def dofs(self) -> list[str]:
+        """Names of the actuated DoF of this body's joint (``knee.L`` style joint names)."""
+        if self.kind == "ball":
+            return [f"{self.joint_name}:{a}" for a in self.euler]
+        if self.kind == "hinge":
+            return [self.joint_name]
+        return []
+
+    @property
+    def joint_name(self) -> str:
+        """Anatomical name of the joint at the body's proximal end."""
+        base, _, side = self.label.partition(".")
+        name = {"spine": "spine", "head": "neck", "upper_arm": "shoulder", "lower_arm": "elbow",
+                "upper_leg": "hip", "lower_leg": "knee", "foot": "ankle", "hand": "wrist", "pelvis": "root"}[base]
+        return f"{name}.{side}" if side else name
+
+
+@dataclasses.dataclass
+class Ragdoll:
+    """Links in parent-first order plus the body they came from."""
+
+    links: list[Link]
+    weight_kg: float
+    height_m: float
+    body_id: str
+
+    def link(self, label: str) -> Link:
+        return next(k for k in self.links if k.label == label)
+
+    @property
+    def dof_names(self) -> list[str]:
+        return [d for k in self.links for d in k.dofs]
+
+    @property
+    def total_mass(self) -> float:
+        return float(sum(k.mass.mass_kg for k in self.links))
+
+
+def expand_layout():
+    """LAYOUT with both sides spelled out (parents before children)."""
+    rows = []
+    for row in LAYOUT:
+        if "{s}" in row[0]:
+            for s in "LR":
+                rows.append(tuple(x.format(s=s) if isinstance(x, str) else x for x in row))
+        else:
+            rows.append(row)
+    order = {r[0]: i for i, r in enumerate(rows)}
+    return sorted(rows, key=lambda r: _depth(r, order, rows))
+
+
+def _depth(row, order, rows):
+    depth, parent = 0, row[1]
+    while parent is not None:
+        depth += 1
+        parent = rows[order[parent]][1]
+    return depth, order[row[0]]
+
+
+def capsule_radius(volume: float, length: float) -> float:
+    """Radius r of a capsule of total volume ``volume`` whose cap centres are ``length`` apart."""
+    roots = np.roots([4.0 / 3.0 * np.pi, np.pi * length, 0.0, -volume])
+    return float(max(r.real for r in roots if abs(r.imag) < 1e-9 and r.real > 0))
+
+
+def _foot_box(body, ankle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half sizes of the box around the mesh vertices below the ankle (sole on y = 0)."""
+    v = body.vertices
+    near = (v[:, 1] < ankle[1]) & (np.abs(v[:, 0] - ankle[0]) < 0.12) & (np.abs(v[:, 2] - ankle[2]) < 0.35)
+    lo, hi = v[near].min(0), v[near].max(0)
+    lo[1] = 0.0
+    hi[1] = ankle[1]
+    return (lo + hi) / 2, (hi - lo) / 2
+
+
+def _axis_quat(direction: np.ndarray) -> np.ndarray:
+    """Quaternion (w-first) turning +z onto ``direction`` (for capsule inertia frames)."""
+    z = np.array([0.0, 0.0, 1.0])
+    d = direction / np.linalg.norm(direction)
+    c = float(np.dot(z, d))
+    if c < -0.999999:
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    axis = np.cross(z, d)
+    q = np.array([1.0 + c, *axis])
+    return q / np.linalg.norm(q)
+
+
+def _shape(label: str, seg, body, anchor: np.ndarray, rig) -> tuple[dict, np.ndarray, np.ndarray, float]:
+    """Geometry (body-local), principal inertia per kg and its frame for one segment."""
+    name = label.split(".")[0]
+    if name == "head":
+        radius = (3 * seg.volume_m3 / (4 * np.pi)) ** (1 / 3)
+        centre = seg.com_geometric - anchor
+        return {"type": "sphere", "size": [radius], "pos": centre}, inertia.sphere_inertia(1.0, radius), np.array([1.0, 0, 0, 0]), radius
+    if name == "foot":
+        centre, half = _foot_box(body, anchor)
+        return ({"type": "box", "size": half, "pos": centre - anchor}, inertia.box_inertia(1.0, half),
+                np.array([1.0, 0, 0, 0]), float(half[0]))
+    if name == "pelvis":
+        a, b = rig.rest_heads[rig.index("upperleg01.L")], rig.rest_heads[rig.index("upperleg01.R")]
+    else:
+        a, b = seg.proximal, seg.distal
+    length = float(np.linalg.norm(b - a))
+    radius = capsule_radius(seg.volume_m3, length)
+    geom = {"type": "capsule", "fromto": np.concatenate([a - anchor, b - anchor]), "size": [radius]}
+    return geom, inertia.capsule_inertia(1.0, radius, length / 2), _axis_quat(b - a), radius
+
+
+def build_ragdoll(body, weight_kg: float | None = None, hinge_axes: dict[str, np.ndarray] | None = None) -> Ragdoll:
+    """The ragdoll of a fitted ``stimuli.bodies.Body`` with Table-1 masses for ``weight_kg``.
+
+    ``weight_kg`` defaults to the body's own mass; ``hinge_axes`` maps ``lower_leg.L`` … to a
+    unit axis (world, rest pose) for the elbows and knees (default: the body's +x, its left).
+    """
+    weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
+    height = float(body.anthropometry.height_m)
+    inertia.check_weight(weight, height)
+    masses = {m.label: m for m in inertia.segment_masses(body.segments, weight)}
+    segs = {s.label: s for s in body.segments}
+    rig = body.rig
+    links = []
+    for label, parent, kind, joint_bone, bone, euler in expand_layout():
+        anchor = rig.rest_heads[rig.index(joint_bone)].astype(float)
+        geom, unit_inertia, iquat, _ = _shape(label, segs[label], body, anchor, rig)
+        axis = None
+        if kind == "hinge":
+            axis = np.asarray((hinge_axes or {}).get(label, [1.0, 0.0, 0.0]), float)
+            axis = axis / np.linalg.norm(axis)
+        links.append(Link(label, parent, kind, anchor, bone, euler, masses[label], geom,
+                          unit_inertia * masses[label].mass_kg, iquat, axis))
+    return Ragdoll(links, weight, height, body.body_id)
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.6g}" for v in np.atleast_1d(values))
+
+
+def _geom_xml(link: Link) -> str:
+    g = link.geom
+    where = f'fromto="{_fmt(g["fromto"])}"' if "fromto" in g else f'pos="{_fmt(g["pos"])}"'
+    if link.label.startswith("foot"):
+        # Only the feet collide (with the floor); friction as on a belt or floor.
+        contact = f'contype="2" conaffinity="1" friction="{FOOT_FRICTION} 0.02 0.002"'
+    else:
+        contact = 'contype="0" conaffinity="0"'
+    return f'<geom name="{link.label}" type="{g["type"]}" size="{_fmt(g["size"])}" {where} {contact} mass="0"/>'
+
+
+def _joint_xml(link: Link) -> str:
+    if link.kind == "free":
+        return '<freejoint name="root"/>'
+    if link.kind == "hinge":
+        return f'<joint name="{link.joint_name}" type="hinge" axis="{_fmt(link.hinge_axis)}" armature="{ARMATURE}"/>'
+    if link.kind == "ball":
+        axes = {"X": "1 0 0", "Y": "0 1 0", "Z": "0 0 1"}
+        return "".join(f'<joint name="{d}" type="hinge" axis="{axes[d[-1]]}" armature="{ARMATURE}"/>'
+                       for d in link.dofs)
+    return ""
+
+
+def to_mjcf(ragdoll: Ragdoll, timestep: float, kp: dict[str, float], kd: dict[str, float]) -> str:
+    """MJCF text of the ragdoll on a ground plane with one PD position actuator per DoF.
+
+    ``kp``/``kd`` map DoF names to gains (N·m/rad, N·m·s/rad): τ = kp (q̄ − q) − kd q̇.
+    """
+    children: dict[str | None, list[Link]] = {}
+    for link in ragdoll.links:
+        children.setdefault(link.parent, []).append(link)
+
+    def body_xml(link: Link, parent_anchor: np.ndarray) -> str:
+        pos = link.anchor - parent_anchor
+        m = link.mass
+        inert = (f'<inertial pos="{_fmt(m.com - link.anchor)}" quat="{_fmt(link.inertia_quat)}" '
+                 f'mass="{m.mass_kg:.6g}" diaginertia="{_fmt(link.inertia)}"/>')
+        inner = "".join(body_xml(c, link.anchor) for c in children.get(link.label, []))
+        return (f'<body name="{link.label}" pos="{_fmt(pos)}">{inert}{_joint_xml(link)}'
+                f'{_geom_xml(link)}{inner}</body>')
+
+    root = children[None][0]
+    actuators = "".join(
+        f'<position name="{d}" joint="{d}" kp="{kp[d]:.6g}" kv="{kd[d]:.6g}"/>' for d in ragdoll.dof_names)
+    return f"""<mujoco model="ragdoll_{ragdoll.body_id}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{timestep:.8g}" gravity="0 -9.81 0" integrator="implicitfast"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 1" zaxis="0 1 0" contype="1" conaffinity="2" friction="{FOOT_FRICTION} 0.02 0.002"/>
+    {body_xml(root, np.zeros(3))}
+  </worldbody>
+  <actuator>{actuators}</actuator>
+</mujoco>"""
+
+
+def compile_model(ragdoll: Ragdoll, timestep: float, kp: dict[str, float], kd: dict[str, float]):
+    """A compiled ``mujoco.MjModel`` of the ragdoll."""
+    import mujoco
+
+    return mujoco.MjModel.from_xml_string(to_mjcf(ragdoll, timestep, kp, kd))

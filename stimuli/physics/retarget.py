@@ -1,0 +1,132 @@
+"""The COM method end to end: motion + body (+ weight) → ragdoll simulation → COM Motion + report.
+
+Examples
+--------
+>>> from stimuli.bodies import fit_body                                  # doctest: +SKIP
+>>> from stimuli.motion import Motion
+>>> result = retarget(Motion.load("walk_F.npz"), fit_body("F", 1.60, 28.1))
+>>> result.motion.save("walk_F_Hi1_COM.npz"); result.report["b_m"], result.report["fell"]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from stimuli.errors import StimuliError
+from stimuli.physics import inertia
+from stimuli.physics.controller import Gains, set_joint_gains
+from stimuli.physics.output import joint_rms_difference, to_motion
+from stimuli.physics.ragdoll import build_ragdoll, compile_model
+from stimuli.physics.reference import build_reference
+from stimuli.physics.simulate import simulate
+
+
+class RagdollFellError(StimuliError):
+    """The ragdoll fell while tracking the motion (the report says when and why)."""
+
+
+@dataclasses.dataclass
+class RetargetResult:
+    motion: object
+    report: dict
+    sim: object
+    reference: object
+    ragdoll: object
+
+
+def prepare(motion, body, weight_kg: float | None = None, gains: Gains | None = None, rate_hz: float = 1000.0):
+    """Reference targets, ragdoll and compiled model with the fixed gains (no simulation yet)."""
+    gains = gains or Gains.load()
+    ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, weight_kg, axes))
+    kp, kd = gains.joint_gains(ragdoll.dof_names)
+    model = compile_model(ragdoll, 1.0 / rate_hz, kp, kd)
+    set_joint_gains(model, kp, kd)
+    return ref, ragdoll, model, gains
+
+
+def tracking_rms(sim, ragdoll) -> dict[str, float]:
+    """RMS (degrees) per joint of the angle between simulated and target joint rotations."""
+    out, col = {}, 0
+    for link in ragdoll.links:
+        n = len(link.dofs)
+        if not n:
+            continue
+        q, r = sim.q[:, col:col + n], sim.qref[:, col:col + n]
+        if n == 1:
+            err = np.abs(q[:, 0] - r[:, 0])
+        else:
+            err = (Rotation.from_euler(link.euler, r).inv() * Rotation.from_euler(link.euler, q)).magnitude()
+        out[link.joint_name] = float(np.degrees(np.sqrt(np.mean(err**2))))
+        col += n
+    return out
+
+
+def root_drift(sim) -> dict[str, float]:
+    """Distance (m) of the simulated pelvis from its target: horizontal mean/max, vertical max."""
+    pelvis = sim.body_names.index("pelvis")
+    d = sim.xpos[:, pelvis] - sim.root_target
+    horiz = np.linalg.norm(d[:, [0, 2]], axis=1)
+    return {"horizontal_mean_m": float(horiz.mean()), "horizontal_max_m": float(horiz.max()),
+            "vertical_max_m": float(np.abs(d[:, 1]).max())}
+
+
+def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Gains, nocom: dict | None) -> dict:
+    """The JSON report of one retargeting (see docs/readme_physics.md for the fields)."""
+    ref_w = float(reference_body.anthropometry.mass_kg)
+    ref_masses = inertia.segment_masses(reference_body.segments, ref_w)
+    masses = inertia.segment_masses(body.segments, weight_kg)
+    track = tracking_rms(sim, ragdoll)
+    report = {
+        "body": _body_row(body, weight_kg), "reference_body": _body_row(reference_body, ref_w),
+        "b_m": inertia.balance_factor(ref_masses, masses, reference_body.rig.rest_heads[0], body.rig.rest_heads[0]),
+        "com_m": np.round(inertia.whole_body_com(masses), 5).tolist(),
+        "reference_com_m": np.round(inertia.whole_body_com(ref_masses), 5).tolist(),
+        "segments": [m.as_row() for m in masses],
+        "tracking_rms_deg": {k: round(v, 3) for k, v in track.items()},
+        "tracking_rms_deg_overall": round(float(np.sqrt(np.mean(np.square(list(track.values()))))), 3),
+        "root_drift": {k: round(v, 4) for k, v in root_drift(sim).items()},
+        "fell": bool(sim.fell), "fall_time_s": sim.fall_time_s, "fall_reason": sim.fall_reason,
+        "simulated_s": round(sim.simulated_s, 4), "wall_s": round(sim.wall_s, 4),
+        "wall_per_simulated": round(sim.wall_s / sim.simulated_s, 4), "timestep_s": sim.timestep,
+        "rate_hz": round(1.0 / sim.timestep, 2), "dof": len(ragdoll.dof_names),
+        "gains": {k: getattr(gains, k) for k in ("k_p", "k_d", "k_pf", "k_df", "k_pr", "k_dr")},
+    }
+    if nocom is not None:
+        report["nocom_rms_deg"] = {k: round(v, 3) for k, v in nocom.items()}
+        report["nocom_rms_deg_mean"] = round(float(np.mean(list(nocom.values()))), 3)
+    return report
+
+
+def _body_row(body, weight_kg: float) -> dict:
+    h = float(body.anthropometry.height_m)
+    return {"body_id": body.body_id, "sex": body.sex, "height_m": round(h, 4), "weight_kg": round(weight_kg, 3),
+            "bmi": round(weight_kg / h**2, 3)}
+
+
+def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
+             warmup_loops: int = 1, rate_hz: float = 1000.0, raise_on_fall: bool = False) -> RetargetResult:
+    """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
+
+    ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
+    target body itself, b = 0). With ``raise_on_fall`` a fall raises :class:`RagdollFellError`
+    (its ``.result`` holds the report); otherwise ``result.motion`` is None after a fall.
+    """
+    weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
+    inertia.check_weight(weight, float(body.anthropometry.height_m))
+    ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
+    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz)
+    out, nocom = None, None
+    if not sim.fell:
+        out = to_motion(motion, body, sim, ref, ragdoll)
+        nocom = joint_rms_difference(motion, out, ref, ragdoll)
+    report = build_report(sim, ragdoll, body, reference_body or body, weight, gains, nocom)
+    result = RetargetResult(out, report, sim, ref, ragdoll)
+    if sim.fell and raise_on_fall:
+        err = RagdollFellError(f"the ragdoll of body {body.body_id} ({weight:.1f} kg) fell at "
+                               f"t = {sim.fall_time_s:.2f} s: {sim.fall_reason}")
+        err.result = result
+        raise err
+    return result

@@ -1,0 +1,187 @@
+"""Run the ragdoll in MuJoCo: PD tracking of the reference, fall detection, recorded trajectories.
+
+The simulation step is an integer fraction of the clip's frame period (≥ 1 kHz by default,
+never below 500 Hz), so recorded frames fall exactly on the clip's frames. The clip is looped:
+``warmup_loops`` passes let the start transient die out, then one more pass is recorded (plus the
+frame that closes it, so the output loop can be made seamless).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from stimuli.physics.controller import Gains, root_wrench
+
+MIN_RATE_HZ = 500.0
+DEFAULT_RATE_HZ = 1000.0
+# A fall: pelvis below this fraction of its target height, trunk tilted beyond this angle, or
+# the root this far (m) from its target horizontally.
+FALL_HEIGHT_FRACTION = 0.6
+FALL_TILT_DEG = 60.0
+FALL_DRIFT_M = 0.5
+
+
+@dataclasses.dataclass
+class SimResult:
+    """Recorded trajectories of the last (recorded) loop, one row per clip frame (+1 closing frame)."""
+
+    fps: float
+    timestep: float
+    times: np.ndarray
+    qpos: np.ndarray
+    q: np.ndarray
+    qref: np.ndarray
+    xquat: np.ndarray
+    xpos: np.ndarray
+    root_target: np.ndarray
+    pelvis_com: np.ndarray
+    body_com: np.ndarray
+    knee_torque: np.ndarray
+    foot_contact: np.ndarray
+    step_times: np.ndarray
+    fell: bool
+    fall_time_s: float | None
+    fall_reason: str
+    simulated_s: float
+    wall_s: float
+    body_names: list[str]
+    dof_names: list[str]
+
+
+def steps_per_frame(fps: float, rate_hz: float = DEFAULT_RATE_HZ) -> int:
+    """Simulation steps per clip frame so that the rate is at least ``rate_hz`` (and ≥ 500 Hz)."""
+    return max(1, math.ceil(max(rate_hz, MIN_RATE_HZ) / fps))
+
+
+def _initial_state(model, data, target: dict, dof_adr: np.ndarray) -> None:
+    import mujoco
+
+    data.qpos[:3] = target["root_pos"][0]
+    data.qpos[3:7] = target["root_quat"][0]
+    data.qvel[:3] = target["root_vel"][0]
+    data.qvel[3:6] = _to_local(target["root_quat"][0], target["root_omega"][0])
+    data.qpos[dof_adr + 1] = target["q"][0]
+    data.qvel[dof_adr] = target["qd"][0]
+    data.ctrl[:] = target["q"][0]
+    mujoco.mj_forward(model, data)
+
+
+def _to_local(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    from stimuli.motion import quat
+
+    return quat.rotate(quat.inv(q), v)
+
+
+def ground_offset(model, ref, n: int = 60) -> float:
+    """Vertical shift (m) that puts the lowest foot points over the clip on the floor.
+
+    Poses the model kinematically at ``n`` instants of the reference and takes, per instant, the
+    lowest corner of the two foot boxes; the 10th percentile of those minima goes to y = 0.
+    """
+    import mujoco
+
+    data = mujoco.MjData(model)
+    dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
+    feet = [g for g in range(model.ngeom) if model.geom(g).name.startswith("foot")]
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    target = ref.sample(np.linspace(0, ref.period, n, endpoint=False))
+    lows = []
+    for i in range(n):
+        data.qpos[:3] = target["root_pos"][i]
+        data.qpos[3:7] = target["root_quat"][i]
+        data.qpos[dof_adr + 1] = target["q"][i]
+        mujoco.mj_kinematics(model, data)
+        low = min((data.geom_xpos[g][:, None] + data.geom_xmat[g].reshape(3, 3) @ (corners * model.geom_size[g]).T)[1].min()
+                  for g in feet)
+        lows.append(low)
+    return -float(np.percentile(lows, 10))
+
+
+def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = DEFAULT_RATE_HZ,
+             duration_s: float | None = None) -> SimResult:
+    """Track ``ref`` with the ragdoll ``model``; record the loop after ``warmup_loops`` passes.
+
+    ``duration_s`` (optional) records that long instead of one loop (benchmarks, tests).
+    """
+    import mujoco
+
+    k = steps_per_frame(ref.fps, rate_hz)
+    dt = 1.0 / (ref.fps * k)
+    model.opt.timestep = dt
+    data = mujoco.MjData(model)
+    n_rec = ref.n_frames + 1 if duration_s is None else int(round(duration_s * ref.fps)) + 1
+    start_frame = warmup_loops * ref.n_frames
+    n_steps = (start_frame + n_rec - 1) * k + 1
+    lift = ground_offset(model, ref)
+    target = ref.sample(np.arange(n_steps) * dt)
+    target["root_pos"][:, 1] += lift
+    dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
+    pelvis = model.body("pelvis").id
+    knees = [model.actuator(f"knee.{s}").id for s in "LR"]
+    foot_geoms = [model.geom(f"foot.{s}").id for s in "LR"]
+    _initial_state(model, data, target, dof_adr)
+    rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "pelvis_com", "body_com")}
+    knee_torque = np.zeros((n_steps, 2))
+    contact = np.zeros((n_steps, 2), bool)
+    target_height = target["root_pos"][:, 1]
+    fell, fall_time, reason = False, None, ""
+    wall = time.perf_counter()
+    for i in range(n_steps):
+        if i % k == 0 and i // k >= start_frame:
+            _record(rec, data, target, i, dof_adr, pelvis)
+        data.ctrl[:] = target["q"][i]
+        omega = data.xmat[pelvis].reshape(3, 3) @ data.qvel[3:6]
+        data.xfrc_applied[pelvis] = root_wrench(gains, data.qpos[:3], data.qvel[:3], data.qpos[3:7], omega, target, i)
+        mujoco.mj_step(model, data)
+        if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+            fell, fall_time, reason = True, (i + 1) * dt, "the simulation diverged (gains unstable for this body)"
+            break
+        knee_torque[i] = data.actuator_force[knees]
+        if data.ncon:
+            geoms = data.contact.geom[: data.ncon]
+            contact[i] = [np.any(geoms == g) for g in foot_geoms]
+        if i % k == 0:
+            reason = _fall_reason(data, pelvis, target, i, target_height[i])
+            if reason:
+                fell, fall_time = True, (i + 1) * dt
+                break
+    wall = time.perf_counter() - wall
+    simulated = (i + 1) * dt
+    out = {key: np.array(v) for key, v in rec.items()}
+    first = start_frame * k
+    return SimResult(
+        fps=ref.fps, timestep=dt, times=(np.arange(len(out["qpos"])) + start_frame) / ref.fps, **out,
+        knee_torque=knee_torque[first:i + 1], foot_contact=contact[first:i + 1],
+        step_times=np.arange(first, i + 1) * dt, fell=fell, fall_time_s=fall_time, fall_reason=reason,
+        simulated_s=simulated, wall_s=wall, body_names=[model.body(b).name for b in range(model.nbody)],
+        dof_names=[model.actuator(a).name for a in range(model.nu)])
+
+
+def _record(rec: dict, data, target: dict, i: int, dof_adr: np.ndarray, pelvis: int) -> None:
+    rec["qpos"].append(data.qpos.copy())
+    rec["q"].append(data.qpos[dof_adr + 1].copy())
+    rec["qref"].append(target["q"][i].copy())
+    rec["xquat"].append(data.xquat.copy())
+    rec["xpos"].append(data.xpos.copy())
+    rec["root_target"].append(target["root_pos"][i].copy())
+    rec["pelvis_com"].append(data.xipos[pelvis].copy())
+    rec["body_com"].append(data.subtree_com[pelvis].copy())
+
+
+def _fall_reason(data, pelvis: int, target: dict, i: int, target_height: float) -> str:
+    """Why the ragdoll counts as fallen at this step ('' when it stands)."""
+    height = data.xpos[pelvis][1]
+    if height < FALL_HEIGHT_FRACTION * target_height:
+        return f"pelvis at {height:.2f} m, below {FALL_HEIGHT_FRACTION:.0%} of its target height {target_height:.2f} m"
+    up = data.xmat[pelvis].reshape(3, 3)[:, 1]
+    tilt = math.degrees(math.acos(max(-1.0, min(1.0, up[1]))))
+    if tilt > FALL_TILT_DEG:
+        return f"pelvis tilted {tilt:.0f}° from vertical (limit {FALL_TILT_DEG:.0f}°)"
+    drift = float(np.linalg.norm((data.xpos[pelvis] - target["root_pos"][i])[[0, 2]]))
+    if drift > FALL_DRIFT_M:
+        return f"pelvis {drift:.2f} m away from its target horizontally (limit {FALL_DRIFT_M} m)"
+    return ""
