@@ -256,3 +256,25 @@ def render_report(context: dict, out: Path) -> str:
 
 def _data_uri(path: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def demo_report(design_dir: str | Path, out: str | Path, participants: int | None = None, seed: int = 1,
+                fmt: str = "qualtrics") -> Path:
+    """For ``shapemotion demo``: simulate responses from the protocol's default model, then analyse them.
+
+    Writes ``<out>/responses.csv`` (in ``fmt``) and the report folder ``<out>/report``; returns the
+    path of ``report.html``.
+    """
+    from analysis.io_files import atomic_write_text
+    from analysis.io_writers import export_text
+    from analysis.model_spec import load_model
+    from analysis.simulate import simulate_responses
+
+    design = load_design(design_dir)
+    out = Path(out)
+    n = participants or design.participants or 16
+    sim = simulate_responses(design, load_model(None, design), n, seed)
+    responses = out / ("responses.json" if fmt == "jspsych-json" else "responses.csv")
+    atomic_write_text(responses, export_text(sim, design, fmt.replace("-json", ""), responses.suffix, seed=seed))
+    analyze(design_dir, responses, out / "report")
+    return out / "report" / "report.html"
