@@ -163,24 +163,23 @@ def anova(
     """
     if not 0 < alpha < 1:
         raise AnalysisError(f"alpha must be between 0 and 1, got {alpha}")
+    observed = tuple(observed or ())
+    for o in observed:
+        if o not in tuple(within or ()) + tuple(between or ()):
+            raise AnalysisError(f"observed factor {o!r} is not one of the factors")
     prep = prepare(data, dv, subject, within, between)
     comp = CompiledDesign(prep.design)
     res = comp.fit(prep.Y, alpha=alpha)
-    observed = tuple(observed or ())
-    for o in observed:
-        if o not in prep.design.within and o not in prep.design.between:
-            raise AnalysisError(f"observed factor {o!r} is not one of the factors")
     names = [e.name for e in comp.effects]
     if observed:
         # afex: ges = SS / (SS + Σ error SS + Σ SS of effects with a measured factor − own SS if measured)
         ss = res["ss"]
         obs = np.array([any(o in e.factors for o in observed) for e in comp.effects])
         res["eta2_generalized"] = ss / (ss + res["stratum_ss"].sum() + (ss * obs).sum() - ss * obs)
-    eff = pd.DataFrame({c: res[c] for c in EFFECT_COLUMNS}, index=pd.Index(names, name="effect"))
     err_label = ["Error" if not s else f"Error({s})" for s in comp.stratum_names]
-    eff.insert(0, "error", [err_label[i] for i in comp.eff_s])
-    eff.insert(0, "order", [e.order for e in comp.effects])
-    eff.insert(0, "factors", [e.factors for e in comp.effects])
+    cols = {"factors": [e.factors for e in comp.effects], "order": [e.order for e in comp.effects],
+            "error": [err_label[i] for i in comp.eff_s], **{c: res[c] for c in EFFECT_COLUMNS}}
+    eff = pd.DataFrame(cols, index=pd.Index(names, name="effect"))
     strata = pd.DataFrame(
         {"ss": res["stratum_ss"], "df": res["stratum_df"].astype(float)}, index=pd.Index(err_label, name="stratum")
     )

@@ -21,7 +21,7 @@ so ``M @ Y @ C`` followed by block sums of squares gives every SS of every data 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from itertools import product
 from math import prod
 
@@ -55,6 +55,25 @@ def _members(mask: int, names: tuple[str, ...]) -> tuple[str, ...]:
 def _mask_order(n_factors: int) -> list[int]:
     """Subsets of n factors as bit masks, in Yates (standard) order: ∅, A, B, AB, C, AC, BC, ABC, …"""
     return list(range(1 << n_factors))
+
+
+@lru_cache(maxsize=64)
+def within_contrasts(wk: tuple[int, ...]) -> tuple[np.ndarray, tuple[slice, ...]]:
+    """All within contrasts side by side (cells × cells, orthogonal) and the column block of each stratum.
+
+    Stratum S (a bit mask over the within factors, Yates order) gets kron over factors of: normalised Helmert
+    contrasts for a factor in S, the normalised mean 1/sqrt(k) for a factor not in S.
+    """
+    blocks, slices, start = [], [], 0
+    for s in _mask_order(len(wk)):
+        mats = [helmert_orthonormal(k) if s >> i & 1 else np.full((k, 1), 1 / np.sqrt(k)) for i, k in enumerate(wk)]
+        c = _kron_all(mats)
+        blocks.append(c)
+        slices.append(slice(start, start + c.shape[1]))
+        start += c.shape[1]
+    C = np.hstack(blocks)
+    C.setflags(write=False)
+    return C, tuple(slices)
 
 
 @dataclass(frozen=True)
@@ -169,14 +188,7 @@ class CompiledDesign:
 
         # ---- within: orthonormal contrasts per within subset (stratum), in Yates order
         self.strata_masks = _mask_order(len(wnames))
-        blocks, self.col_slices, start = [], [], 0
-        for s in self.strata_masks:
-            mats = [helmert_orthonormal(k) if s >> i & 1 else np.full((k, 1), 1 / np.sqrt(k)) for i, k in enumerate(wk)]
-            c = _kron_all(mats)
-            blocks.append(c)
-            self.col_slices.append(slice(start, start + c.shape[1]))
-            start += c.shape[1]
-        self.C = np.hstack(blocks)  # K × K orthogonal
+        self.C, self.col_slices = within_contrasts(tuple(wk))  # K × K orthogonal, one column block per stratum
         self.d = np.array([sl.stop - sl.start for sl in self.col_slices])
 
         # ---- between: full-factorial sum-to-zero (orthonormal Helmert) coding

@@ -131,3 +131,15 @@ def test_max_relative_error_report():
                     worst = max(worst, abs(float(row[c]) - e[c]) / abs(e[c]))
     print(f"max relative error vs R afex fixtures: {worst:.2e}")
     assert worst <= RTOL
+
+
+def test_generalized_eta2_with_observed_factor():
+    """afex's ges with observed = "gender" (a measured, not manipulated, factor) on obk.long."""
+    fx = json.loads((FIXTURES / "obk.json").read_text())
+    d = fx["design"]
+    data = pd.read_csv(FIXTURES / "obk.csv")
+    table = anova(data, d["dv"], d["subject"], as_list(d["within"]), as_list(d["between"]),
+                  observed=as_list(d["observed"]))
+    for e in r_effects(fx):
+        row = table.effect(":".join(as_list(e["factors"])))
+        assert_close(row["eta2_generalized"], e["eta2_generalized_observed"], f"{e['effect']} ges (observed gender)")
