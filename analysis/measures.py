@@ -174,19 +174,20 @@ def measure_arrays(design: DesignInfo, stimulus_matrix: np.ndarray, draws: np.nd
     if np.any(counts == 0):
         raise AnalysisError("a participant's trial list leaves a design cell empty; cannot compute cell means")
     if design.response_type == "likert":
-        return np.einsum("spt,ptc->spc", draws.astype(float), onehot) / counts[None]
+        # batched matrix products (BLAS) instead of einsum: (s, p, 1, t) @ (p, t, c) → (s, p, 1, c)
+        return np.matmul(draws.astype(float)[:, :, None, :], onehot)[:, :, 0, :] / counts[None]
     level_of = _level_codes(design)[stimulus_matrix]                 # n × t × positions → level index
     k = len(design.alternatives.levels)
     if design.response_type == "afc":
         chosen = np.take_along_axis(np.broadcast_to(level_of, draws.shape + level_of.shape[-1:]),
                                     draws[..., None], axis=-1)[..., 0]
         hits = (chosen[..., None] == np.arange(k)).astype(float)     # s × n × t × k
-        values = np.einsum("sptk,ptc->spck", hits, onehot) / counts[None, :, :, None] * 100.0
+        values = np.matmul(onehot.transpose(0, 2, 1), hits) / counts[None, :, :, None] * 100.0
     else:
         order = np.take_along_axis(np.broadcast_to(level_of, draws.shape), draws, axis=-1)  # levels best first
         points = np.zeros(order.shape)
         np.put_along_axis(points, order, np.arange(k, 0, -1, dtype=float)[None, None, None, :], axis=-1)
-        values = np.einsum("sptk,ptc->spck", points, onehot) / counts[None, :, :, None]
+        values = np.matmul(onehot.transpose(0, 2, 1), points) / counts[None, :, :, None]
     return values.reshape(values.shape[0], values.shape[1], -1)
 
 

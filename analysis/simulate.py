@@ -146,6 +146,9 @@ def draw(design: DesignInfo, model: GenerativeModel, plan: TrialPlan, rng: np.ra
     if design.response_type == "likert":
         noise = rng.normal(0.0, model.residual_sd, latent.shape[:3])
         return 1 + np.searchsorted(np.asarray(model.thresholds), latent[..., 0] + noise).astype(np.int64)
+    if design.response_type == "afc" and latent.shape[-1] == 2:
+        # 2AFC: logistic choice, P(right) = σ(u_right − u_left); one logistic draw instead of two Gumbels
+        return (rng.logistic(size=latent.shape[:3]) < latent[..., 1] - latent[..., 0]).astype(np.int64)
     gumbel = rng.gumbel(size=latent.shape)
     utility = np.where(np.isnan(latent), -np.inf, latent + gumbel)
     if design.response_type == "afc":

@@ -18,7 +18,9 @@ from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_co
 TIMING = re.compile(r"_(First Click|Last Click|Page Submit|Click Count)$", re.IGNORECASE)
 RANK_POSITION = re.compile(r"^(?P<base>.+)_(?P<pos>\d+)$")
 UNFINISHED = {"0", "false", "no"}
-NOT_REAL = {"1", "survey preview", "4", "survey test", "8", "spam", "16", "offline"}
+# Qualtrics Status codes that are not real respondents (numeric export / choice-text export).
+NOT_REAL = {"1", "2", "8", "9", "12", "17", "survey preview", "survey test", "spam", "preview spam",
+            "imported spam", "offline survey preview"}
 
 
 @dataclass

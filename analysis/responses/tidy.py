@@ -144,11 +144,14 @@ def _check_cells(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
         group_of[a.participant] = _cell_key(row, design.between)
         seen[a.participant].add(_cell_key(row, design.cell_factors))
     for a, _ in scored:
-        expected = cells_of_group.get(group_of.get(a.participant), set())
-        missing = sorted(expected - seen[a.participant]) if a.participant in group_of else ["(all)"]
+        if a.participant not in group_of:
+            drop(a, "missing cells", "no answer to any test stimulus (practice only)")
+            continue
+        expected = cells_of_group.get(group_of[a.participant], set())
+        missing = sorted(expected - seen[a.participant])
         if missing:
-            example = ", ".join(f"{f}={v}" for f, v in zip(design.cell_factors, missing[0])) if expected else "all"
-            drop(a, "missing cells", f"{len(missing)} of {len(expected) or '?'} design cells have no valid answer "
+            example = ", ".join(f"{f}={v}" for f, v in zip(design.cell_factors, missing[0]))
+            drop(a, "missing cells", f"{len(missing)} of {len(expected)} design cells have no valid answer "
                                      f"(e.g. {example})")
     return scored
 
