@@ -72,6 +72,13 @@
   }
 
   function videoTrial(trial, choices, extra) {
+    var onStart = extra.on_start;
+    extra = Object.assign({}, extra, {
+      on_start: function (t) {   // the clip on screen, for automation (preloaded clips play from blob: URLs)
+        window.SHAPEMOTION_STATUS.clip = trial.id;
+        if (onStart) { onStart(t); }
+      }
+    });
     return Object.assign({
       type: jsPsychVideoButtonResponse,
       stimulus: [cfg.clips[trial.id]],
