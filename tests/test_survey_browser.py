@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import http.server
 import io
+import json
 import threading
 from pathlib import Path
 
@@ -251,3 +252,30 @@ def test_visual_simulation_plays_the_clips(tmp_path, browser):
     tests = frame[frame["kind"] == "test"]
     assert len(tests) == 4 and set(tests["response_label"]) <= {"Light", "Medium", "Heavy"}
     assert (tests["rating"].astype(int) == tests["response"].astype(int) + 1).all()
+
+
+def test_ranking_is_recorded_as_an_order_of_labels(tmp_path, browser):
+    design, site = exported(tmp_path, load_protocol(ROOT / "protocols" / "thesis_validation.yaml"), 4)
+    server = Server(site)
+    try:
+        page = browser.new_page()
+        frames = [run_page(page, f"{server.url}/index.html?participant={n}&simulate=data-only&save=0")
+                  for n in range(1, 5)]
+        page.close()
+    finally:
+        server.close()
+    for frame in frames:
+        steps = frame[frame["clip_id"] != ""]
+        assert steps["rank_step"].tolist() == ["1", "2", "3"]
+        (answer,) = steps.loc[steps["stimulus_id"] != "", "response"]
+        order = json.loads(answer)
+        assert sorted(order) == ["A", "B", "C", "D"]
+        assert steps["response_label"].tolist() == order[:3]
+    from analysis.io_design import load_design
+    from analysis.responses import import_responses
+
+    pd.concat(frames, ignore_index=True).to_csv(tmp_path / "r.csv", index=False)
+    result = import_responses(tmp_path / "r.csv", load_design(design))
+    assert result.reconciles and len(result.data) == 4
+    assert all(sorted(r.split(">")) == sorted(["lean_mocap", "keyframed", "modifier", "obese_mocap"])
+               for r in result.data["ranking"])

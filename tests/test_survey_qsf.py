@@ -224,3 +224,39 @@ def test_same_design_gives_identical_text_and_valid_json(folders):
     first, second = qsf_text(source, BASE), qsf_text(load_source(folders["exp1_shape_motion"]), BASE)
     assert first == second
     assert json.loads(first) == build_qsf(source, BASE)
+
+
+def test_an_export_of_this_survey_imports_by_its_tags(qsfs, folders, tmp_path):
+    """A response file shaped like Qualtrics's CSV export of this QSF (3 header rows: export tags,
+    question text, ImportId) maps every answer to its stimulus through the export tags alone."""
+    import csv
+
+    from analysis.io_design import load_design
+    from analysis.responses import import_responses
+
+    qsf = qsfs["exp1_shape_motion"]
+    answers = [q for q in answered(qsf) if not q["DataExportTag"].startswith("practice-")]
+    sex_of = {q["DataExportTag"]: q["DataExportTag"][0] for q in answers}
+    columns = ["StartDate", "EndDate", "Status", "Progress", "Finished", "ResponseId"]
+    rows = [columns + [q["DataExportTag"] for q in answers] + ["SEX", "shapemotion_protocol"],
+            columns + [q["QuestionDescription"] for q in answers] + ["SEX", "shapemotion_protocol"],
+            [json.dumps({"ImportId": c[0].lower() + c[1:]}) for c in columns]
+            + [json.dumps({"ImportId": q["QuestionID"]}) for q in answers]
+            + [json.dumps({"ImportId": "SEX"}), json.dumps({"ImportId": "shapemotion_protocol"})]]
+    expected = {}
+    for n, sex in enumerate(["F", "F", "M", "M"], start=1):
+        values = []
+        for i, q in enumerate(answers):   # only the group's own questions are shown (and answered)
+            value = str(1 + (i + n) % 5) if sex_of[q["DataExportTag"]] == sex else ""
+            values.append(value)
+            if value:
+                expected[(f"R_{n}", q["DataExportTag"].rsplit("_r", 1)[0], q["DataExportTag"][-1])] = int(value)
+        rows.append(["2024-01-01 10:00:00", "2024-01-01 10:20:00", "0", "100", "1", f"R_{n}"] + values
+                    + [sex, "exp1_shape_motion"])
+    path = tmp_path / "qualtrics.csv"
+    with open(path, "w", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+    result = import_responses(path, load_design(folders["exp1_shape_motion"]))
+    assert result.reconciles and result.format == "qualtrics"
+    got = {(r.participant, r.stimulus_id, str(r.repetition)): int(r.rating) for r in result.data.itertuples()}
+    assert got == expected and len(got) == 4 * 64
