@@ -154,7 +154,7 @@ def within_tolerance(targets: Targets, measured: dict[str, float]) -> bool:
 @functools.lru_cache(maxsize=8)
 def _start_grid(sex: str, age_years: float):
     """Heights and BMIs on a coarse (height, build) grid, once per sex and age per process."""
-    hs, ss = np.array([0.15, 0.55]), np.linspace(0.0, BUILD_MAX, 13)
+    hs, ss = np.array([0.15, 0.55]), np.linspace(0.0, BUILD_MAX, 9)
     grid = np.array([[h, s] for h in hs for s in ss])
     rows, _ = measure_batch(Targets(sex, 1.7, 22.0, age_years=age_years), grid, ("height", "build"))
     height = np.array([r["height_m"] for r in rows]).reshape(2, -1)
