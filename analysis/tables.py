@@ -95,6 +95,9 @@ def default_caption(table: AnovaTable, all_rows: bool, alpha: float, correction:
         parts.append("between " + " × ".join(table.between))
     if table.within:
         parts.append("within " + " × ".join(table.within))
+    lo, hi = table.rows_per_cell
+    if hi > 1:
+        parts.append(f"{lo}" + (f"–{hi}" if hi > lo else "") + " rows averaged per subject × cell")
     rows = "all effects" if all_rows else f"significant effects (p < {alpha:g})"
     corr = {"gg": ", Greenhouse–Geisser corrected p", "hf": ", Huynh–Feldt corrected p"}.get(correction, "")
     return (f"{kind} of {table.dv} ({'; '.join(parts)}; N = {table.n_subjects}): {rows}, with effect size "
