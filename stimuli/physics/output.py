@@ -6,7 +6,10 @@ rotations, so fingers, toes and twist bones move as in the reference. When the m
 body's own rig (Anny bone names), offsets and root translation are the target body's; otherwise
 the root is placed so the motion's hip centre follows the simulated one, in the motion's scale.
 The belt progression added for the simulation is removed again (treadmill clip), and the recorded
-pass (N + 1 frames) is closed into a seamless N-frame loop with ``stimuli.motion.loop.close_loop``.
+pass (N + 1 frames) is closed into a seamless N-frame loop by spreading the small pose mismatch
+between its last and first frame linearly over the clip (the simulation is periodic after the
+warm-up, so the mismatch is small; a velocity-matching Hermite closure would amplify the
+simulation's step-to-step noise).
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ from __future__ import annotations
 import numpy as np
 
 from stimuli.motion import quat
-from stimuli.motion.loop import close_loop
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import role_indices
 
@@ -71,7 +73,18 @@ def to_motion(motion: Motion, body, sim, ref, ragdoll) -> Motion:
                 physics={"body_id": ragdoll.body_id, "weight_kg": ragdoll.weight_kg, "height_m": ragdoll.height_m})
     out = Motion(fps=motion.fps, joint_names=motion.joint_names, parents=motion.parents, offsets=offsets,
                  rotations=rotations, root_translation=root, metadata=meta)
-    return close_loop(out)
+    return close_loop_linear(out)
+
+
+def close_loop_linear(motion: Motion) -> Motion:
+    """Make frame N equal frame 0 by a linearly growing correction, then drop frame N."""
+    n = motion.n_frames - 1
+    s = np.arange(n + 1) / n
+    q = quat.unroll(motion.rotations)
+    d = quat.to_axis_angle(quat.mul(quat.inv(q[-1]), q[0]))
+    rot = quat.mul(q, quat.from_axis_angle(s[:, None, None] * d))
+    root = motion.root_translation + s[:, None] * (motion.root_translation[0] - motion.root_translation[-1])
+    return motion.replace(rotations=rot[:-1], root_translation=root[:-1])
 
 
 def joint_rms_difference(a: Motion, b: Motion, ref, ragdoll) -> dict[str, float]:

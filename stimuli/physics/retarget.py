@@ -55,7 +55,9 @@ def tracking_rms(sim, ragdoll) -> dict[str, float]:
         if not n:
             continue
         q, r = sim.q[:, col:col + n], sim.qref[:, col:col + n]
-        if n == 1:
+        if len(q) == 0:
+            err = np.full(1, np.nan)
+        elif n == 1:
             err = np.abs(q[:, 0] - r[:, 0])
         else:
             err = (Rotation.from_euler(link.euler, r).inv() * Rotation.from_euler(link.euler, q)).magnitude()
@@ -67,6 +69,8 @@ def tracking_rms(sim, ragdoll) -> dict[str, float]:
 def root_drift(sim) -> dict[str, float]:
     """Distance (m) of the simulated pelvis from its target: horizontal mean/max, vertical max."""
     pelvis = sim.body_names.index("pelvis")
+    if len(sim.xpos) == 0:
+        return {"horizontal_mean_m": float("nan"), "horizontal_max_m": float("nan"), "vertical_max_m": float("nan")}
     d = sim.xpos[:, pelvis] - sim.root_target
     horiz = np.linalg.norm(d[:, [0, 2]], axis=1)
     return {"horizontal_mean_m": float(horiz.mean()), "horizontal_max_m": float(horiz.max()),

@@ -152,6 +152,10 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     wall = time.perf_counter() - wall
     simulated = (i + 1) * dt
     out = {key: np.array(v) for key, v in rec.items()}
+    if not rec["qpos"]:  # fell during the warm-up: empty arrays of the right shapes
+        shapes = {"qpos": model.nq, "q": model.nu, "qref": model.nu, "xquat": (model.nbody, 4),
+                  "xpos": (model.nbody, 3), "root_target": 3, "pelvis_com": 3, "body_com": 3}
+        out = {key: np.zeros((0, *np.atleast_1d(shape))) for key, shape in shapes.items()}
     first = start_frame * k
     return SimResult(
         fps=ref.fps, timestep=dt, times=(np.arange(len(out["qpos"])) + start_frame) / ref.fps, **out,

@@ -29,7 +29,7 @@ from stimuli.physics.retarget import tracking_rms
 from stimuli.physics.simulate import simulate
 
 BASE = {"sex": "M", "height_m": 1.75, "bmi": 23.0, "motion": "cmu_35_01_walk.bvh", "cycles": 2, "fps": 30.0}
-LEVER_M = 0.3
+LEVER_M = 0.5
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 

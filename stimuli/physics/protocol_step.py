@@ -1,0 +1,169 @@
+"""All COM motions of a protocol (Experiment 2): every actor × gait, cached, two processes.
+
+For each sex × gait the NoCOM motion is the average motion ``<motions>/<sex>_<gait>.npz`` when a
+motions folder is given (the motions step's DTW averages); otherwise the built-in generator's
+walk/jog for the sex's reference body stands in (documented fallback, metadata says so). The
+reference body (for b) is the body the NoCOM motion belongs to: its metadata ``height_m``/``bmi``
+when present, else the mean height and BMI of the protocol's test actors of that sex. Each COM
+motion is cached under ``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the
+gains file and the code version, so a second run only copies files.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from stimuli.errors import StimuliError
+
+CODE_VERSION = "physics-2"
+
+
+def cache_dir() -> Path:
+    from stimuli.bodies.backend import project_cache_root
+
+    return project_cache_root() / "physics"
+
+
+def reference_targets(protocol, sex: str, motion=None) -> tuple[float, float]:
+    """(height_m, bmi) of the reference body of a sex: from the motion's metadata, else the mean."""
+    meta = motion.metadata if motion is not None else {}
+    if "height_m" in meta and "bmi" in meta:
+        return float(meta["height_m"]), float(meta["bmi"])
+    actors = [a for a in protocol.actors if a.sex == sex and not a.practice_only]
+    if not actors:
+        raise StimuliError(f"protocol {protocol.name}: no test actors of sex {sex}")
+    return float(np.mean([a.height_m for a in actors])), float(np.mean([a.bmi for a in actors]))
+
+
+def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
+    """The NoCOM (average) motion of a sex × gait, or the generator's stand-in."""
+    from stimuli.motion import Motion
+
+    if motions_dir is not None:
+        path = Path(motions_dir) / f"{sex}_{gait}.npz"
+        if not path.is_file():
+            raise StimuliError(f"{path}: NoCOM average motion for sex {sex}, gait {gait} not found "
+                               f"(expected <motions>/<sex>_<gait>.npz)")
+        return Motion.load(path)
+    from stimuli.motion.generate import GaitParams, generate
+
+    spec = protocol.gaits[gait]
+    height, _ = reference_targets(protocol, sex)
+    cycles = int(protocol.clip.cycles)
+    m = generate(GaitParams(gait=gait, cadence_spm=spec.cadence_spm, speed_mps=spec.speed_mps),
+                 height_m=height, fps=float(protocol.clip.fps), cycles=cycles)
+    m.metadata["nocom_source"] = "generator (no average motion given)"
+    return m
+
+
+def _key(motion_path: Path, actor: dict, gains_text: str) -> str:
+    h = hashlib.sha256()
+    h.update(motion_path.read_bytes())
+    h.update(json.dumps(actor, sort_keys=True).encode())
+    h.update(gains_text.encode())
+    h.update(CODE_VERSION.encode())
+    return h.hexdigest()[:20]
+
+
+def _job(args: dict) -> dict:
+    """One actor × gait (runs in a worker process)."""
+    from stimuli.bodies import fit_body
+    from stimuli.motion import Motion
+    from stimuli.physics.analysis_fig7 import gait_curves
+    from stimuli.physics.retarget import retarget
+
+    motion = Motion.load(args["motion"])
+    body = fit_body(args["sex"], args["height_m"], args["bmi"])
+    ref_body = fit_body(args["sex"], *args["reference"])
+    result = retarget(motion, body, args["weight_kg"], reference_body=ref_body)
+    report = result.report
+    report["actor"] = args["actor"]
+    report["gait"] = args["gait"]
+    if not result.sim.fell:
+        curves = gait_curves(result.sim, result.ragdoll, int(motion.metadata.get("cycles", 2)))
+        report["fig7"] = curves
+        report["knee_flexion_peak_deg"] = curves["knee_flexion_peak_deg"]
+        result.motion.metadata.update(actor=args["actor"], gait=args["gait"])
+        result.motion.save(args["out_motion"])
+    Path(args["out_report"]).write_text(json.dumps(report, indent=1, sort_keys=True))
+    return report
+
+
+def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | Path | None = None,
+                 workers: int = 2, progress=print) -> dict:
+    """Make every COM motion of the protocol under ``out``; returns {"reports": [...], "figures": [...]}."""
+    from stimuli.physics.analysis_fig7 import plot_fig7
+    from stimuli.physics.controller import GAINS_FILE
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol(protocol_path)
+    out = Path(out)
+    (out / "nocom").mkdir(parents=True, exist_ok=True)
+    (out / "motions").mkdir(exist_ok=True)
+    (out / "reports").mkdir(exist_ok=True)
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    gains_text = GAINS_FILE.read_text()
+    jobs, cached = [], []
+    for gait in protocol.gaits:
+        for sex in sorted({a.sex for a in protocol.actors}):
+            motion = nocom_motion(protocol, sex, gait, Path(motions_dir) if motions_dir else None)
+            nocom_path = motion.save(out / "nocom" / f"{sex}_{gait}.npz")
+            reference = reference_targets(protocol, sex, motion)
+            for actor in (a for a in protocol.actors if a.sex == sex):
+                spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
+                        "weight_kg": actor.weight_kg, "gait": gait, "reference": list(reference)}
+                key = _key(nocom_path, spec, gains_text)
+                job = dict(spec, motion=str(nocom_path), out_motion=str(cache / f"{key}.npz"),
+                           out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}")
+                (cached if Path(job["out_report"]).is_file() else jobs).append(job)
+    progress(f"physics: {len(jobs)} COM motion(s) to simulate, {len(cached)} cached")
+    if jobs:
+        workers = max(1, min(workers, len(jobs), os.cpu_count() or 1))
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            for job, report in zip(jobs, pool.map(_job, jobs)):
+                progress(f"  {job['name']}: b {report['b_m'] * 1000:.2f} mm, tracking {report['tracking_rms_deg_overall']:.2f}°, "
+                         f"{'FELL' if report['fell'] else 'ok'}")
+    reports = []
+    for job in cached + jobs:
+        report = json.loads(Path(job["out_report"]).read_text())
+        shutil.copyfile(job["out_report"], out / "reports" / f"{job['name']}.json")
+        if Path(job["out_motion"]).is_file():
+            shutil.copyfile(job["out_motion"], out / "motions" / f"{job['name']}.npz")
+        reports.append(report)
+    figures = _figures(protocol, reports, out, plot_fig7)
+    _summary(reports, out / "summary.csv")
+    fell = [f"{r['actor']} ({r['gait']}): {r['fall_reason']}" for r in reports if r["fell"]]
+    if fell:
+        raise StimuliError(f"{protocol_path}: the ragdoll fell for {len(fell)} COM motion(s): " + "; ".join(fell)
+                           + f". Reports are in {out / 'reports'}")
+    return {"reports": reports, "figures": figures}
+
+
+def _figures(protocol, reports: list[dict], out: Path, plot) -> list[Path]:
+    paths = []
+    for gait in protocol.gaits:
+        curves = {f"{r['body']['sex']}/{r['actor']}": dict(r["fig7"], bmi=r["body"]["bmi"], sex=r["body"]["sex"])
+                  for r in reports if r["gait"] == gait and "fig7" in r and not r["actor"].split("_")[-1].startswith("P")}
+        if curves:
+            paths += plot(curves, out / f"fig7_{gait}", title=f"{protocol.name}: COM method, {gait}")
+    return paths
+
+
+def _summary(reports: list[dict], path: Path) -> None:
+    import pandas as pd
+
+    rows = [{"actor": r["actor"], "gait": r["gait"], "sex": r["body"]["sex"], "height_m": r["body"]["height_m"],
+             "weight_kg": r["body"]["weight_kg"], "bmi": r["body"]["bmi"],
+             "reference_weight_kg": r["reference_body"]["weight_kg"], "b_mm": round(r["b_m"] * 1000, 4),
+             "tracking_rms_deg": r["tracking_rms_deg_overall"], "nocom_rms_deg": r.get("nocom_rms_deg_mean"),
+             "knee_flexion_peak_deg": r.get("knee_flexion_peak_deg"), "fell": r["fell"],
+             "wall_per_simulated": r["wall_per_simulated"]} for r in reports]
+    pd.DataFrame(rows).sort_values(["gait", "sex", "actor"]).to_csv(path, index=False)
