@@ -23,6 +23,7 @@ COMMAND_MODULES = [
     "analysis.commands_report",
     "stimuli.commands.bodies_cmd",
     "stimuli.commands.survey_cmd",
+    "stimuli.commands.physics_cmd",
 ]
 
 
