@@ -20,7 +20,7 @@ FAMILIARIZATION_INTRO = "Before this part, you will see the characters it shows,
 BLOCK_INTRO = "Part {k} of {n} begins now."
 CONTINUE = "Continue"
 CONSENT_AGREE = "I agree"
-WATCH_FIRST = "The answer buttons appear once the clip has played to the end. Click the clip to replay it."
+WATCH_FIRST = "You can answer once the clip has played to the end; you may replay it."
 END_TEXT = "Thank you! Your answers are being saved."
 
 
