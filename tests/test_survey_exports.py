@@ -201,3 +201,28 @@ def test_user_errors_exit_2_without_output(tmp_path, run_cli, case, expected):
 def test_export_api_rejects_unknown_format(tmp_path):
     with pytest.raises(StimuliError, match="--format"):
         export_survey(design_folder(tmp_path, "thesis_validation"), "word", tmp_path / "x")
+
+
+def test_export_all_writes_every_format_for_render_and_demo(tmp_path):
+    from stimuli.survey import export_all
+
+    folder = design_folder(tmp_path, "exp2_com_vs_average")
+    results = export_all(folder, video_base_url="https://x.org")
+    assert [r.format for r in results] == ["qsf", "qualtrics-txt", "jspsych", "psychopy"]
+    survey = folder / "survey"
+    assert {p.name for p in survey.iterdir()} == {"survey.qsf", "survey_qualtrics.txt", "jspsych", "psychopy",
+                                                  "qualtrics_manual_steps.txt"}
+    assert "Randomizer presenting all 4 Groups" in (survey / "qualtrics_manual_steps.txt").read_text()
+    again = export_all(folder, video_base_url="https://x.org")      # a second run keeps the jsPsych folder
+    assert "left as it is" in again[2].notes[0]
+
+
+def test_missing_jspsych_install_is_a_user_error(tmp_path, run_cli, monkeypatch):
+    from stimuli.survey import export_all
+
+    folder = design_folder(tmp_path, "thesis_validation")
+    monkeypatch.setenv("SHAPEMOTION_NODE_MODULES", str(tmp_path / "nowhere"))
+    code, _, err = run_cli("survey", folder, "--format", "jspsych", "--out", tmp_path / "js")
+    assert code == 2 and "npm ci" in err and not (tmp_path / "js").exists()
+    results = export_all(folder, tmp_path / "all")
+    assert "jsPsych is not installed" in results[2].notes[0] and (tmp_path / "all" / "survey.qsf").exists()

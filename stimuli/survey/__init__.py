@@ -18,7 +18,10 @@ from stimuli.survey.source import SurveySource, load_source
 
 FORMATS = ("qsf", "qualtrics-txt", "jspsych", "psychopy")
 
-__all__ = ["FORMATS", "ExportResult", "export_survey", "load_source", "SurveySource"]
+__all__ = ["FORMATS", "ExportResult", "export_all", "export_survey", "load_source", "SurveySource"]
+# Where export_all puts each format inside its output folder.
+ALL_OUTPUTS = {"qsf": "survey.qsf", "qualtrics-txt": "survey_qualtrics.txt", "jspsych": "jspsych",
+               "psychopy": "psychopy"}
 
 
 @dataclass
@@ -65,3 +68,33 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
 
         write_psychopy(source, out)
     return result
+
+
+def export_all(folder: str | Path, out_dir: str | Path | None = None,
+               video_base_url: str | None = None) -> list[ExportResult]:
+    """Every format into ``out_dir`` (default ``folder/survey``), for ``render`` and ``demo``.
+
+    The TXT's manual steps go to ``qualtrics_manual_steps.txt`` next to it. An existing jsPsych
+    folder is left alone (a note says so), and a missing jsPsych install (no ``npm ci``) skips that
+    format with a note instead of failing the whole export.
+    """
+    from stimuli.errors import StimuliError
+
+    out_dir = Path(out_dir) if out_dir is not None else Path(folder) / "survey"
+    results = []
+    for fmt, name in ALL_OUTPUTS.items():
+        target = out_dir / name
+        if fmt == "jspsych" and target.exists():
+            results.append(ExportResult(target, fmt, [f"{target} exists; left as it is"]))
+            continue
+        try:
+            result = export_survey(folder, fmt, target, video_base_url)
+        except StimuliError as exc:
+            if fmt != "jspsych" or "jsPsych is not installed" not in str(exc):
+                raise
+            result = ExportResult(target, fmt, [str(exc)])
+        if result.manual_steps:
+            steps = "\n".join(f"{n}. {step}" for n, step in enumerate(result.manual_steps, start=1))
+            atomic_write_text(out_dir / "qualtrics_manual_steps.txt", steps + "\n")
+        results.append(result)
+    return results

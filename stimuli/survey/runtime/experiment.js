@@ -69,6 +69,13 @@
     video.addEventListener("click", function () {
       if (video.ended) { video.currentTime = 0; video.play(); }
     });
+    // A browser that refuses to autoplay gets the controls, so the participant can start the clip.
+    window.setTimeout(function () {
+      if (video.paused && !video.ended && video.currentTime === 0) {
+        var start = video.play();
+        if (start && start.catch) { start.catch(function () { video.controls = true; }); }
+      }
+    }, 500);
   }
 
   function videoTrial(trial, choices, extra) {
