@@ -68,7 +68,7 @@ def anova_design(design: DesignInfo, plan: TrialPlan) -> AnovaDesign:
     return AnovaDesign.make(within=within, n_subjects=len(plan.groups))
 
 
-def testable_effects(design: DesignInfo, effects: list[str]) -> list[str]:
+def informative_effects(design: DesignInfo, effects: list[str]) -> list[str]:
     """Effects the measure can test: with percentages or rank points the alternatives always sum to a
     constant within a cell, so only effects that involve the alternatives factor carry information."""
     if design.response_type == "likert":
@@ -120,7 +120,7 @@ def _anova_rejections(design, model, plan, rng, sims, alpha, progress):
         hits = (np.nan_to_num(result.p, nan=1.0) < alpha).sum(axis=0)
         names = result.effects
         counts = hits if counts is None else counts + hits
-    keep = testable_effects(design, names)
+    keep = informative_effects(design, names)
     return keep, [int(counts[names.index(e)]) for e in keep]
 
 

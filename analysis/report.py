@@ -126,10 +126,8 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
 
 def _testable(table, design: DesignInfo):
     """Drop effects a constant-sum measure cannot test (those without the alternatives factor)."""
-    if design.response_type == "likert":
-        return table
-    alt = design.alternatives.name
-    keep = [e for e in table.effects.index if alt in table.effects.loc[e, "factors"]]
+    from analysis.power import informative_effects
+    keep = informative_effects(design, list(table.effects.index))
     return dataclasses.replace(table, effects=table.effects.loc[keep])
 
 
