@@ -279,3 +279,32 @@ def test_ranking_is_recorded_as_an_order_of_labels(tmp_path, browser):
     assert result.reconciles and len(result.data) == 4
     assert all(sorted(r.split(">")) == sorted(["lean_mocap", "keyframed", "modifier", "obese_mocap"])
                for r in result.data["ranking"])
+
+
+def test_group_and_list_come_from_the_url(tmp_path, browser):
+    design, site = exported(tmp_path, parse_protocol(TINY))
+    trials = pd.read_csv(design / "trials.csv", dtype=str)
+    group_of = trials.groupby("participant")["SEX"].first()
+    server = Server(site)
+    try:
+        page = browser.new_page()
+
+        def run(query: str) -> pd.DataFrame:
+            return run_page(page, f"{server.url}/index.html?simulate=data-only&save=0&{query}")
+
+        by_number = [run(f"participant={n}") for n in range(1, 9)]
+        males = [run(f"SEX=M&participant={n}") for n in (1, 2, 3)]
+        fixed = run("list=3&participant=anna")
+        anonymous = run("")
+        page.close()
+    finally:
+        server.close()
+    lists = [f["list"].iloc[0] for f in by_number]
+    assert lists == ["1", "2", "3", "4", "1", "2", "3", "4"]          # participant N → list (N-1) mod 4 + 1
+    assert sorted(f["SEX"].iloc[0] for f in by_number[:4]) == ["F", "F", "M", "M"]
+    assert all(f["SEX"].iloc[0] == group_of[f["list"].iloc[0]] for f in by_number)
+    assert [f["SEX"].iloc[0] for f in males] == ["M"] * 3
+    assert males[0]["list"].iloc[0] != males[1]["list"].iloc[0]
+    assert males[0]["list"].iloc[0] == males[2]["list"].iloc[0]         # 2 M lists: participant 3 wraps to 1
+    assert (fixed["list"].iloc[0], fixed["participant"].iloc[0]) == ("3", "anna")
+    assert anonymous["participant"].iloc[0].startswith("p") and anonymous["list"].iloc[0] in {"1", "2", "3", "4"}
