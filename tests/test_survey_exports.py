@@ -122,6 +122,17 @@ def test_jspsych_uses_manifest_files_and_copies_clips(tmp_path):
     assert read_config(tmp_path / "js")["clips"] == {"all-lean_mocap_keyframed_modifier_obese_mocap": "media/v.mp4"}
 
 
+def test_jspsych_with_a_base_url_references_the_clips_there(tmp_path):
+    folder = design_folder(tmp_path, "thesis_validation")
+    (folder / "clips").mkdir()
+    (folder / "clips" / "all-lean_mocap_keyframed_modifier_obese_mocap.mp4").write_bytes(b"x")
+    result = export_survey(folder, "jspsych", tmp_path / "js", "https://cdn.example.org/v1/")
+    assert read_config(tmp_path / "js")["clips"] == {
+        "all-lean_mocap_keyframed_modifier_obese_mocap":
+            "https://cdn.example.org/v1/clips/all-lean_mocap_keyframed_modifier_obese_mocap.mp4"}
+    assert not (tmp_path / "js" / "clips").exists() and not result.notes
+
+
 def test_exports_are_deterministic(tmp_path):
     folder = design_folder(tmp_path, "exp2_com_vs_average")
     for fmt in ("jspsych", "psychopy"):

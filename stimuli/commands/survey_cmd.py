@@ -18,7 +18,7 @@ def register(subparsers) -> None:
     p.add_argument("--format", required=True, choices=FORMATS)
     p.add_argument("--out", type=Path, required=True,
                    help="output file (qsf, qualtrics-txt) or new folder (jspsych, psychopy)")
-    p.add_argument("--video-base-url", default=None, help="URL the clips are served from (Qualtrics formats)")
+    p.add_argument("--video-base-url", default=None, help="URL the clips are served from (Qualtrics; jspsych: instead of copying the clips)")
     p.add_argument("--post-url", default="", help="jspsych: also POST each participant's CSV to this URL")
     p.set_defaults(func=run_survey)
 

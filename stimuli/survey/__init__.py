@@ -59,7 +59,7 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
     elif fmt == "jspsych":
         from stimuli.survey.jspsych import write_jspsych
 
-        missing = write_jspsych(source, out, post_url)
+        missing = write_jspsych(source, out, post_url, video_base_url)
         if missing:
             result.notes.append(f"{len(missing)} clip(s) not found in {source.folder} (e.g. "
                                 f"{source.stimulus(missing[0]).file}); copy them into {out}/clips/ before running")

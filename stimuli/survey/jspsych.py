@@ -49,8 +49,12 @@ def node_modules() -> Path:
     return Path(configured) if configured else Path(__file__).resolve().parents[2] / "node_modules"
 
 
-def config(source: SurveySource, post_url: str = "") -> dict:
-    """Everything experiment.js needs, with all protocol text already HTML-escaped."""
+def config(source: SurveySource, post_url: str = "", video_base_url: str | None = None) -> dict:
+    """Everything experiment.js needs, with all protocol text already HTML-escaped.
+
+    Clips are relative paths inside the folder, or ``video_base_url`` + path when they are served
+    elsewhere (that server must allow cross-origin requests: the clips are preloaded).
+    """
     p = source.protocol
     labels = answer_labels(p)
     texts = {"consent": consent_html(p), "instructions": instructions_html(p), "question": question_html(p),
@@ -65,7 +69,7 @@ def config(source: SurveySource, post_url: str = "") -> dict:
         "response": {"type": p.response.type, "labels": labels, "labels_html": [escape(x) for x in labels]},
         "clip": {"width": min(p.clip.width, 1280), "height": p.clip.height},
         "text": texts,
-        "clips": {s.stimulus_id: clip_url(None, s.file) for s in source.stimuli if s.stimulus_id in used},
+        "clips": {s.stimulus_id: clip_url(video_base_url, s.file) for s in source.stimuli if s.stimulus_id in used},
         "lists": _lists(source),
         "post_url": post_url,
     }
@@ -102,11 +106,12 @@ def index_html(source: SurveySource) -> str:
     return env.get_template("index.html.j2").render(title=p.title or p.name, scripts=scripts, version="0.1.0")
 
 
-def write_jspsych(source: SurveySource, out_dir: str | Path, post_url: str = "") -> list[str]:
+def write_jspsych(source: SurveySource, out_dir: str | Path, post_url: str = "",
+                  video_base_url: str | None = None) -> list[str]:
     """Write the experiment folder (all or nothing: built in a temporary folder, then moved into place).
 
     Returns the stimulus ids whose clips were not found in the source folder (the folder still works
-    once they are copied into ``clips/``).
+    once they are copied into ``clips/``). With ``video_base_url`` the clips are not copied.
     """
     out_dir = Path(out_dir)
     modules = node_modules()
@@ -116,7 +121,7 @@ def write_jspsych(source: SurveySource, out_dir: str | Path, post_url: str = "")
                            f"(npm ci) in the project, or set SHAPEMOTION_NODE_MODULES")
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise StimuliError(f"{out_dir}: exists and is not an empty folder; choose a new --out folder")
-    data = config(source, post_url)
+    data = config(source, post_url, video_base_url)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
     try:
@@ -126,7 +131,7 @@ def write_jspsych(source: SurveySource, out_dir: str | Path, post_url: str = "")
         shutil.copyfile(RUNTIME / "experiment.js", tmp / "experiment.js")
         (tmp / "config.js").write_text(config_js(data), encoding="utf-8")
         (tmp / "index.html").write_text(index_html(source), encoding="utf-8")
-        missing = _copy_clips(source, tmp, data["clips"])
+        missing = [] if video_base_url else _copy_clips(source, tmp, data["clips"])
         tmp.chmod(0o755)  # mkdtemp makes it private; a web server must read it
         if out_dir.exists():
             out_dir.rmdir()
