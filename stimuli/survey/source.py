@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import json
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from urllib.parse import quote
 
@@ -51,12 +52,11 @@ class SurveySource:
     design: dict = field(repr=False, default_factory=dict)
 
     def stimulus(self, stimulus_id: str) -> StimulusInfo:
-        return self._index()[stimulus_id]
+        return self._by_id[stimulus_id]
 
-    def _index(self) -> dict[str, StimulusInfo]:
-        if not hasattr(self, "_by_id"):
-            self._by_id = {s.stimulus_id: s for s in self.stimuli}
-        return self._by_id
+    @cached_property
+    def _by_id(self) -> dict[str, StimulusInfo]:
+        return {s.stimulus_id: s for s in self.stimuli}
 
     def of_kind(self, kind: str) -> list[StimulusInfo]:
         return [s for s in self.stimuli if s.kind == kind]
