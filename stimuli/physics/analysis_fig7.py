@@ -1,8 +1,9 @@
 """The paper's Fig. 7 over one gait cycle (0–100 %): root CoM height, knee extension moment, knee flexion.
 
 Per actor, from the recorded simulation (one steady-state pass of the looped clip, which holds
-``n_cycles`` gait cycles): the cycle starts at the first onset of the left foot's ground contact
-(left heel strike) and lasts pass / n_cycles; the pass is periodic, so cycles may wrap around its
+``n_cycles`` gait cycles): the cycle starts at the reference motion's first left heel strike
+(Zeni's method, ``stimuli.motion.events``; fallback: the first onset of the simulated left foot's
+ground contact) and lasts pass / n_cycles; the pass is periodic, so cycles may wrap around its
 end. Each cycle is resampled to 101 points and the cycles are averaged. Knee flexion is the left knee hinge angle (flexion positive), the knee extension moment
 is minus the left knee actuator torque (the internal moment: positive = extensors) divided by body
 mass, the root CoM trajectory is the pelvis segment's CoM height minus its cycle mean. The
@@ -35,11 +36,25 @@ def heel_strikes(sim, side: int = 0, min_gap_s: float = 0.4) -> np.ndarray:
     return np.array(times)
 
 
-def cycles(sim, n_cycles: int = 2) -> list[tuple[float, float]]:
+def reference_heel_strike_s(motion) -> float | None:
+    """Time (s, from the clip start) of the reference motion's first left heel strike, or None."""
+    from stimuli.motion.events import gait_events
+
+    try:
+        hs = gait_events(motion)["l_hs"]
+    except Exception:  # noqa: BLE001 - events are optional here: fall back to contacts
+        return None
+    return float(hs[0]) / motion.fps if len(hs) else None
+
+
+def cycles(sim, n_cycles: int = 2, start_s: float | None = None) -> list[tuple[float, float]]:
     """Gait cycles (start, end) in seconds: from the first left heel strike, pass / n_cycles long."""
     period = len(sim.times[:-1]) / sim.fps
-    hs = heel_strikes(sim)
-    start = float(hs[0]) if len(hs) else float(sim.times[0])
+    if start_s is not None:
+        start = float(sim.times[0]) + start_s
+    else:
+        hs = heel_strikes(sim)
+        start = float(hs[0]) if len(hs) else float(sim.times[0])
     length = period / n_cycles
     return [(start + k * length, start + (k + 1) * length) for k in range(n_cycles)]
 
@@ -52,9 +67,12 @@ def _normalise(t: np.ndarray, y: np.ndarray, spans) -> np.ndarray:
     return np.mean([np.interp(a + GRID * (b - a), tt, yy) for a, b in spans], axis=0)
 
 
-def gait_curves(sim, ragdoll, n_cycles: int = 2) -> dict:
-    """The three Fig.-7 curves of one simulation (101 samples each) plus the cycles used."""
-    spans = cycles(sim, n_cycles)
+def gait_curves(sim, ragdoll, n_cycles: int = 2, start_s: float | None = None) -> dict:
+    """The three Fig.-7 curves of one simulation (101 samples each) plus the cycles used.
+
+    ``start_s``: the left heel strike within the clip (:func:`reference_heel_strike_s`).
+    """
+    spans = cycles(sim, n_cycles, start_s)
     knee = sim.dof_names.index("knee.L")
     pelvis_y = sim.pelvis_com[:, 1]
     root = _normalise(sim.times, pelvis_y, spans)

@@ -22,7 +22,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-2"
+CODE_VERSION = "physics-4"
 
 
 def cache_dir() -> Path:
@@ -76,7 +76,7 @@ def _job(args: dict) -> dict:
     """One actor × gait (runs in a worker process)."""
     from stimuli.bodies import fit_body
     from stimuli.motion import Motion
-    from stimuli.physics.analysis_fig7 import gait_curves
+    from stimuli.physics.analysis_fig7 import gait_curves, reference_heel_strike_s
     from stimuli.physics.retarget import retarget
 
     motion = Motion.load(args["motion"])
@@ -87,7 +87,8 @@ def _job(args: dict) -> dict:
     report["actor"] = args["actor"]
     report["gait"] = args["gait"]
     if not result.sim.fell:
-        curves = gait_curves(result.sim, result.ragdoll, int(motion.metadata.get("cycles", 2)))
+        curves = gait_curves(result.sim, result.ragdoll, int(motion.metadata.get("cycles", 2)),
+                             reference_heel_strike_s(motion))
         report["fig7"] = curves
         report["knee_flexion_peak_deg"] = curves["knee_flexion_peak_deg"]
         result.motion.metadata.update(actor=args["actor"], gait=args["gait"])

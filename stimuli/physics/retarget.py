@@ -111,16 +111,19 @@ def _body_row(body, weight_kg: float) -> dict:
 
 
 def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
-             warmup_loops: int = 1, rate_hz: float = 1000.0, raise_on_fall: bool = False) -> RetargetResult:
+             min_simulated_s: float = 4.0, rate_hz: float = 1000.0, raise_on_fall: bool = False) -> RetargetResult:
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
     target body itself, b = 0). With ``raise_on_fall`` a fall raises :class:`RagdollFellError`
     (its ``.result`` holds the report); otherwise ``result.motion`` is None after a fall.
+    The clip is simulated in whole passes, at least ``min_simulated_s`` in all (the paper's 4-s
+    clips); the last pass is the COM motion, the ones before it are warm-up.
     """
     weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
     inertia.check_weight(weight, float(body.anthropometry.height_m))
     ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
+    warmup_loops = max(1, int(np.ceil(min_simulated_s / ref.period - 1.0 - 1e-9)))
     sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz)
     out, nocom = None, None
     if not sim.fell:

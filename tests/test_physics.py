@@ -1,0 +1,179 @@
+"""The COM method: Table-1 inertia, the MuJoCo ragdoll, PD tracking, COM motions and the CLI.
+
+Bodies come from the real Anny fitter (cached after the first fit); motions from the bundled CMU
+walk and the built-in generator. Simulations are short (one 2-cycle loop ≈ 1–2 s simulated).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+from stimuli.errors import StimuliError  # noqa: E402
+from stimuli.physics import inertia  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def bodies():
+    from stimuli.bodies import fit_body
+
+    return {"ref": fit_body("F", 1.61, 24.42), "lo": fit_body("F", 1.60, 19.5), "hi": fit_body("F", 1.60, 28.1)}
+
+
+@pytest.fixture(scope="module")
+def walk():
+    from stimuli.motion.generate import GaitParams, generate
+
+    return generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.61, fps=30, cycles=2)
+
+
+@pytest.fixture(scope="module")
+def ref_result(walk, bodies):
+    from stimuli.physics import retarget
+
+    return retarget(walk, bodies["ref"], reference_body=bodies["ref"])
+
+
+def test_capsule_inertia_matches_mujoco():
+    xml = ('<mujoco><worldbody><body><freejoint/><geom type="capsule" size="0.07 0.18" mass="3.2"/>'
+           '</body></worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    np.testing.assert_allclose(inertia.capsule_inertia(3.2, 0.07, 0.18), model.body_inertia[1], rtol=1e-9)
+
+
+def test_segment_masses_follow_table1_and_sum_to_weight(bodies):
+    masses = {m.label: m for m in inertia.segment_masses(bodies["hi"].segments, 80.0)}
+    assert sum(m.mass_kg for m in masses.values()) == pytest.approx(80.0, rel=1e-12)
+    assert masses["upper_leg.L"].mass_kg == pytest.approx(80.0 * 0.103)
+    assert masses["head"].mass_kg == pytest.approx(80.0 * 0.073)
+    assert masses["pelvis"].mass_kg + masses["spine"].mass_kg == pytest.approx(80.0 * 0.507)
+    seg = {s.label: s for s in bodies["hi"].segments}["lower_arm.L"]
+    expected = (seg.proximal + seg.distal) / 2 + (seg.distal - seg.proximal) * -0.46
+    np.testing.assert_allclose(masses["lower_arm.L"].com, expected, atol=1e-12)
+
+
+def test_balance_factor_zero_for_reference_and_grows_with_weight_gap(bodies):
+    def b(body):
+        ref = bodies["ref"]
+        return inertia.balance_factor(inertia.segment_masses(ref.segments, ref.anthropometry.mass_kg),
+                                      inertia.segment_masses(body.segments, body.anthropometry.mass_kg),
+                                      ref.rig.rest_heads[0], body.rig.rest_heads[0])
+
+    assert b(bodies["ref"]) == 0.0
+    assert b(bodies["lo"]) > 0 and b(bodies["hi"]) > 0
+
+
+@pytest.mark.parametrize("weight, height", [(0.0, 1.7), (-5.0, 1.7), (400.0, 1.8), (25.0, 1.9), (float("nan"), 1.7)])
+def test_non_physical_weights_are_rejected(weight, height):
+    with pytest.raises(StimuliError, match="weight"):
+        inertia.check_weight(weight, height)
+
+
+def test_ragdoll_model_mass_dofs_and_rest_pose(bodies):
+    from stimuli.physics.ragdoll import build_ragdoll, compile_model
+
+    rd = build_ragdoll(bodies["hi"], 70.0)
+    ones = {d: 1.0 for d in rd.dof_names}
+    model = compile_model(rd, 1e-3, ones, ones)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    assert model.body_mass.sum() == pytest.approx(70.0, rel=1e-6)
+    assert model.nu == 28 and model.nv == 34 and model.nbody == 16
+    rig = bodies["hi"].rig
+    for label, bone in (("lower_leg.L", "lowerleg01.L"), ("head", "neck01"), ("upper_arm.R", "upperarm01.R")):
+        np.testing.assert_allclose(data.xpos[model.body(label).id], rig.rest_heads[rig.index(bone)], atol=1e-6)
+    # Whole-body CoM of the compiled model is the Table-1 CoM.
+    com = inertia.whole_body_com(inertia.segment_masses(bodies["hi"].segments, 70.0))
+    np.testing.assert_allclose(data.subtree_com[model.body("pelvis").id], com, atol=1e-6)
+
+
+def test_reference_body_tracks_within_3_degrees_without_falling(ref_result):
+    rep = ref_result.report
+    assert not rep["fell"]
+    assert rep["b_m"] == 0.0
+    assert rep["tracking_rms_deg_overall"] <= 3.0
+    assert max(rep["tracking_rms_deg"].values()) <= 5.0
+    assert rep["rate_hz"] >= 500 and rep["simulated_s"] >= 4.0
+    assert rep["wall_per_simulated"] < 1.0
+
+
+def test_com_motion_keeps_the_contract_and_loops(ref_result, walk, tmp_path):
+    from stimuli.motion import Motion
+    from stimuli.motion.loop import seam_error
+
+    out = ref_result.motion
+    assert out.joint_names == walk.joint_names and out.n_frames == walk.n_frames and out.fps == walk.fps
+    assert out.metadata["method"] == "COM"
+    back = Motion.load(out.save(tmp_path / "com.npz"))
+    np.testing.assert_allclose(back.rotations, out.rotations)
+    seam = seam_error(out)
+    assert seam["seam_step_m"] <= 1.5 * seam["interior_step_p99_m"]
+
+
+def test_heavier_body_moves_differently(walk, bodies, ref_result):
+    from stimuli.physics import retarget
+
+    heavy = retarget(walk, bodies["hi"], 71.9, reference_body=bodies["ref"]).report
+    assert not heavy["fell"] and heavy["b_m"] > 0
+    diff = [abs(heavy["nocom_rms_deg"][k] - ref_result.report["nocom_rms_deg"][k]) for k in heavy["nocom_rms_deg"]]
+    assert max(diff) > 0.005
+
+
+def test_fall_is_reported_not_hidden(walk, bodies):
+    from stimuli.physics import Gains, RagdollFellError, retarget
+
+    weak = Gains.load()
+    weak.k_p, weak.k_d, weak.k_pf, weak.k_df, weak.k_pr, weak.k_dr = 50.0, 5.0, 0.0, 0.0, 0.0, 0.0
+    with pytest.raises(RagdollFellError, match="fell at t ="):
+        retarget(walk, bodies["ref"], gains=weak, raise_on_fall=True)
+
+
+def test_fig7_curves_and_plot(ref_result, walk, tmp_path):
+    from stimuli.physics.analysis_fig7 import gait_curves, normative_curves, plot_fig7, reference_heel_strike_s
+
+    c = gait_curves(ref_result.sim, ref_result.ragdoll, 2, reference_heel_strike_s(walk))
+    flex = np.array(c["knee_flexion_deg"])
+    assert flex.shape == (101,) and 50 < flex.max() < 80 and flex.argmax() > 55
+    assert abs(np.mean(c["root_com_cm"])) < 1e-9
+    norm = normative_curves()
+    assert 55 < max(norm["knee_flexion_deg"]["mean"]) < 70
+    paths = plot_fig7({"ref": dict(c, bmi=24.4, sex="F")}, tmp_path / "fig7")
+    assert all(p.stat().st_size > 1000 for p in paths)
+
+
+def test_cli_retarget_writes_motion_and_report(run_cli, walk, tmp_path):
+    walk.save(tmp_path / "walk.npz")
+    code, out, err = run_cli("physics", "retarget", "--motion", tmp_path / "walk.npz", "--sex", "F", "--height", "1.61",
+                             "--weight", "63.3", "--out", tmp_path / "com.npz", "--report", tmp_path / "r.json")
+    assert code == 0, err
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert {"b_m", "segments", "tracking_rms_deg", "root_drift", "fell", "simulated_s", "wall_s"} <= set(report)
+    assert len(report["segments"]) == 15
+    assert (tmp_path / "com.npz").is_file()
+
+
+def test_cli_rejects_non_physical_weight(run_cli, walk, tmp_path):
+    walk.save(tmp_path / "walk.npz")
+    code, _, err = run_cli("physics", "retarget", "--motion", tmp_path / "walk.npz", "--sex", "M", "--height", "1.8",
+                           "--weight", "-3", "--out", tmp_path / "x.npz")
+    assert code == 2 and "--weight" in err and "not physical" in err
+
+
+@pytest.mark.slow
+def test_protocol_step_exp2(run_cli, protocol_path, tmp_path):
+    import pandas as pd
+
+    code, _, err = run_cli("physics", "protocol", protocol_path("exp2_com_vs_average"), "--out", tmp_path)
+    assert code == 0, err
+    s = pd.read_csv(tmp_path / "summary.csv")
+    test = s[~s.actor.str.contains("_P")]
+    assert len(test) == 16 and not test.fell.any() and (test.b_mm > 0).all()
+    assert (test.wall_per_simulated < 1).all()
+    for (_, sex), g in test[test.gait == "walk"].groupby(["gait", "sex"]):
+        gap = (g.weight_kg - g.reference_weight_kg).abs()
+        assert np.all(np.diff(g.b_mm.to_numpy()[np.argsort(gap.to_numpy())]) >= -1e-3)
+    assert (tmp_path / "fig7_walk.png").is_file() and (tmp_path / "fig7_jog.svg").is_file()
