@@ -308,3 +308,32 @@ def test_group_and_list_come_from_the_url(tmp_path, browser):
     assert males[0]["list"].iloc[0] == males[2]["list"].iloc[0]         # 2 M lists: participant 3 wraps to 1
     assert (fixed["list"].iloc[0], fixed["participant"].iloc[0]) == ("3", "anna")
     assert anonymous["participant"].iloc[0].startswith("p") and anonymous["list"].iloc[0] in {"1", "2", "3", "4"}
+
+
+def test_six_walkers_in_a_row_record_the_chosen_strength(tmp_path, browser):
+    """Point-light 6-AFC: labels A–F, arrangements rotated over participants, votes per strength."""
+    design, site = exported(tmp_path, load_protocol(ROOT / "protocols" / "thesis_pointlight.yaml"), 6)
+    server = Server(site)
+    try:
+        page = browser.new_page()
+        frames = [run_page(page, f"{server.url}/index.html?participant={n}&simulate=data-only&save=0")
+                  for n in range(1, 7)]
+        page.close()
+    finally:
+        server.close()
+    from analysis.io_design import load_design
+    from analysis.responses import import_responses
+
+    for frame in frames:
+        tests = frame[frame["kind"] == "test"]
+        assert len(tests) == 10
+        for row in tests.itertuples():
+            positions = row.positions.split("|")
+            assert row.response_label == "ABCDEF"[int(row.response)]
+            assert row.chosen == positions[int(row.response)]
+    pd.concat(frames, ignore_index=True).to_csv(tmp_path / "r.csv", index=False)
+    result = import_responses(tmp_path / "r.csv", load_design(design))
+    merged = result.data.merge(pd.concat(frames)[["participant", "stimulus_id", "chosen"]].astype(str),
+                               on=["participant", "stimulus_id"], suffixes=("", "_browser"))
+    assert result.reconciles and len(merged) == 60
+    assert (merged["chosen"].astype(str) == merged["chosen_browser"]).all()

@@ -260,3 +260,26 @@ def test_an_export_of_this_survey_imports_by_its_tags(qsfs, folders, tmp_path):
     assert result.reconciles and result.format == "qualtrics"
     got = {(r.participant, r.stimulus_id, str(r.repetition)): int(r.rating) for r in result.data.itertuples()}
     assert got == expected and len(got) == 4 * 64
+
+
+@pytest.mark.parametrize("per_block, questions_per_block, mode", [(2, 4, "RandomWithOnlyX"),
+                                                                  (6, 8, "RandomWithOnlyX"),
+                                                                  (4, 4, "RandomWithXPerPage")])
+def test_practice_draws_per_block_from_the_pool(tmp_path, per_block, questions_per_block, mode):
+    text = (Path(__file__).resolve().parents[1] / "protocols" / "exp1_shape_motion.yaml").read_text()
+    text = text.replace("per_block: 4 ", f"per_block: {per_block} ")
+    from stimuli.protocol import parse_protocol
+
+    write_design(build_design(parse_protocol(text)), tmp_path / "d")
+    qsf = build_qsf(load_source(tmp_path / "d"), BASE)
+    by_qid = {q["QuestionID"]: q for q in questions(qsf)}
+    practice = [b for b in blocks(qsf).values() if b["Description"].endswith(" practice")]
+    assert len(practice) == 4
+    for block in practice:
+        tags = [by_qid[e["QuestionID"]]["DataExportTag"] for e in block["BlockElements"]]
+        assert len(tags) == questions_per_block and len(set(tags)) == len(tags)
+        assert all(t.startswith("practice-") for t in tags)
+        assert all(t.endswith(("_r1", "_r2")) for t in tags) == (per_block > 4)
+        assert block["Options"]["RandomizeQuestions"] == mode
+        if mode == "RandomWithOnlyX":
+            assert block["Options"]["Randomization"]["Advanced"]["TotalRandSubset"] == per_block
