@@ -24,6 +24,7 @@ COMMAND_MODULES = [
     "stimuli.commands.bodies_cmd",
     "stimuli.commands.survey_cmd",
     "stimuli.commands.physics_cmd",
+    "stimuli.commands.render_cmd",
 ]
 
 

@@ -1,0 +1,72 @@
+"""``shapemotion render`` (every stimulus of a protocol) and ``shapemotion preview`` (one clip)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("render", help="render every stimulus clip of a protocol (resumable)",
+                              description="Render every test, practice and familiarization stimulus of a protocol "
+                                          "into clips/*.mp4, posters/*.png, manifest.csv and contact_sheet.png. "
+                                          "Clips already rendered with the same inputs are kept.")
+    p.add_argument("protocol", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--resolution", default=None, help="WIDTHxHEIGHT (default: the protocol's clip size)")
+    p.add_argument("--fps", type=int, default=None, help="frames per second (default: the protocol's)")
+    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: 2, or fewer cores)")
+    p.add_argument("--limit", type=int, default=None, help="render only the first K selected stimuli")
+    p.add_argument("--only", default=None, help="comma-separated parts of stimulus ids to render")
+    p.add_argument("--quick", action="store_true", help="small, low-frame-rate clips for a fast look")
+    p.add_argument("--poses", choices=["protocol", "procedural"], default="protocol",
+                   help="'procedural': real bodies with a simple stepping pose (checks layout and framing "
+                        "before motions exist)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--verify", action="store_true", help="only re-hash the clips of an existing manifest")
+    p.set_defaults(func=run_render)
+
+    p = subparsers.add_parser("preview", help="render one clip from a motion file and a body spec",
+                              description="Render one clip: a motion (.npz on the Anny rig) or a generated gait "
+                                          "on a body given as sex,height,bmi.")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--motion", type=Path, help="motion .npz (DESIGN.md contract) on the Anny rig")
+    source.add_argument("--gait", choices=["walk", "jog"], help="generate this gait for the body")
+    source.add_argument("--stepping", action="store_true", help="a simple procedural stepping pose")
+    p.add_argument("--body", required=True, help="sex=M,height=1.80,bmi=25")
+    p.add_argument("--layout", choices=["treadmill", "point_light"], default="treadmill")
+    p.add_argument("--out", type=Path, required=True, help="output .mp4 (a poster .png is written next to it)")
+    p.add_argument("--resolution", default="1280x720")
+    p.add_argument("--fps", type=int, default=30)
+    p.add_argument("--duration", type=float, default=4.0, help="seconds")
+    p.add_argument("--camera", default="35,10,4,40", help="azimuth,elevation,distance,fov (degrees, metres)")
+    p.add_argument("--speed", type=float, default=None, help="belt speed in m/s (default: the motion's)")
+    p.set_defaults(func=run_preview)
+
+
+def run_render(args: argparse.Namespace) -> int:
+    from stimuli.errors import StimuliError
+    from stimuli.render.manifest import verify_manifest
+    from stimuli.render.pipeline import render_protocol
+
+    if args.verify:
+        problems = verify_manifest(args.out)
+        for line in problems:
+            print(line)
+        if problems:
+            raise StimuliError(f"{args.out}/manifest.csv: {len(problems)} clip(s) do not verify")
+        print(f"{args.out}/manifest.csv: every clip verifies")
+        return 0
+    report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps, limit=args.limit,
+                             only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
+                             source=args.poses)
+    print(report.summary())
+    return 0
+
+
+def run_preview(args: argparse.Namespace) -> int:
+    from stimuli.render.preview import preview
+
+    path = preview(args)
+    print(path)
+    return 0

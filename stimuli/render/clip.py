@@ -1,0 +1,200 @@
+"""One clip's frames: figures (body + pose sequence) placed on a stage and rendered frame by frame.
+
+Layouts (DESIGN.md): ``treadmill`` (one figure), ``side_by_side`` (two, screen left → right),
+``row`` (k labelled figures), ``point_light`` (one or k dot walkers on black). Figures stand on
+a line across the screen (the camera's right axis on the ground), so every figure is seen from
+the same angle and at the same depth. Skinning is batched per chunk of frames into one
+preallocated buffer per figure, whose rows are then uploaded into the figure's GL vertex buffer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from stimuli.render.camera import orbit_view
+from stimuli.render.labels import LabelOverlay
+from stimuli.render.scene import Stage, grey_material, hex_colour
+
+LAYOUTS = ("treadmill", "side_by_side", "row", "point_light")
+SKIN_CHUNK = 32
+
+
+@dataclass
+class Figure:
+    """A body and its per-frame pose (on the body's own rig) for exactly the clip's frames."""
+
+    body: object                   # stimuli.bodies.Body
+    rotations: np.ndarray          # (N, J, 4) local quaternions, w-first
+    root_translation: np.ndarray   # (N, 3) metres
+    belt_speed_mps: float = 0.0
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Look:
+    """Everything about a clip's appearance that comes from the protocol (or the command line)."""
+
+    layout: str
+    width: int
+    height: int
+    fps: int
+    duration_s: float
+    azimuth_deg: float = 30.0
+    elevation_deg: float = 10.0
+    distance_m: float = 4.0
+    fov_deg: float = 40.0
+    background: str = "#ffffff"
+    labels: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def n_frames(self) -> int:
+        return int(round(self.duration_s * self.fps))
+
+
+def slot_offsets(n: int, view_width_m: float) -> np.ndarray:
+    """Positions of n figures along the screen's horizontal, centred, spread over the view.
+
+    >>> slot_offsets(2, 8.0).tolist()
+    [-2.0, 2.0]
+    """
+    spacing = view_width_m / n
+    return (np.arange(n) - (n - 1) / 2) * spacing
+
+
+def placements(look: Look, n: int, body_height_m: float = 1.75):
+    """A 4×4 pose per figure slot, and the view.
+
+    Slots lie on the camera's horizontal axis. Each slot is turned about the vertical by the angle
+    between the camera's line of sight to the centre and to that slot, so that under perspective
+    every figure is seen from exactly the protocol's azimuth (a fair side-by-side comparison).
+    """
+    target = np.array([0.0, 0.5 * body_height_m, 0.0])   # framed on the body's middle
+    view = orbit_view(target, look.azimuth_deg, look.elevation_deg, look.distance_m, look.fov_deg,
+                      look.width, look.height)
+    half_h = look.distance_m * np.tan(np.radians(look.fov_deg) / 2)
+    view_width = 2 * half_h * look.width / look.height
+    eye = view.pose[:3, 3] * np.array([1.0, 0.0, 1.0])
+    poses = []
+    for s in (slot_offsets(n, view_width) if n > 1 else [0.0]):
+        slot = s * view.right
+        d0, d1 = -eye, slot - eye
+        yaw = np.arctan2(d0[2] * d1[0] - d0[0] * d1[2], d0 @ d1)   # rotation about +y taking d0 to d1
+        pose = np.eye(4)
+        c, si = np.cos(yaw), np.sin(yaw)
+        pose[:3, :3] = [[c, 0.0, si], [0.0, 1.0, 0.0], [-si, 0.0, c]]
+        pose[:3, 3] = slot
+        poses.append(pose)
+    return poses, view
+
+
+def centred_root(figure: Figure) -> np.ndarray:
+    """Root path with its mean horizontal position moved to the origin (the slot's centre)."""
+    root = np.array(figure.root_translation, float)
+    root[:, [0, 2]] -= root[:, [0, 2]].mean(axis=0)
+    return root
+
+
+def apply_pose(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+def render_frames(look: Look, figures: list[Figure]):
+    """Yield the clip's frames, (H, W, 3) uint8, exactly ``look.n_frames`` of them."""
+    from stimuli.render.pointlight import DotFigure, marker_positions
+    from stimuli.render.treadmill import Treadmill, belt_period
+
+    if look.layout not in LAYOUTS:
+        raise ValueError(f"unknown layout {look.layout!r}")
+    n = look.n_frames
+    for f in figures:
+        if len(f.rotations) != n or len(f.root_translation) != n:
+            raise ValueError(f"figure {f.body.body_id}: {len(f.rotations)} poses for a clip of {n} frames")
+    poses, view = placements(look, len(figures), max(f.body.anthropometry.height_m for f in figures))
+    dots = look.layout == "point_light"
+    stage = Stage(view, hex_colour(look.background), lit=not dots)
+    roots = [centred_root(f) for f in figures]
+    if dots:
+        animated = [DotFigure(stage, apply_pose(p, marker_positions(f.body, f.rotations, r)))
+                    for f, r, p in zip(figures, roots, poses)]
+        treadmills = []
+    else:
+        from stimuli.render.treadmill import DECK_HEIGHT_M
+
+        stage.add_checker_floor(np.zeros(3), -DECK_HEIGHT_M)
+        treadmills = [Treadmill(stage, p, f.belt_speed_mps, belt_period(f.belt_speed_mps, look.duration_s, look.fps))
+                      for f, p in zip(figures, poses)]
+        animated = [_SkinnedFigure(stage, f, r, p) for f, r, p in zip(figures, roots, poses)]
+    region = dynamic_region(view, figures, roots, poses, treadmills, dots)
+    offsets = [p[:3, 3] for p in poses]
+    overlay = LabelOverlay(view, [f.label for f in figures], offsets, look.background) if any(f.label for f in figures) else None
+    background = None
+    x0, y0, x1, y1 = region
+    for i in range(n):
+        for a in animated:
+            a.set_frame(i)
+        for t in treadmills:
+            t.set_time(i / look.fps)
+        if background is None:  # everything outside the region is the same in every frame
+            background = stage.render()
+            frame = background
+        else:
+            frame = background.copy()
+            frame[y0:y1, x0:x1] = stage.render(region)
+        yield overlay.apply(frame) if overlay else frame
+
+
+def dynamic_region(view, figures, roots, poses, treadmills, dots: bool, margin_m: float = 0.25):
+    """Pixel rectangle (x0, y0, x1, y1) holding everything that moves during the clip.
+
+    Bodies: every bone head of every frame (forward kinematics, cheap) widened by ``margin_m``
+    for flesh, hands and the top of the head; belts: their four corners.
+    """
+    points = []
+    for f, root, pose in zip(figures, roots, poses):
+        heads = f.body.rig.forward_kinematics(f.rotations, root)[1].reshape(-1, 3)
+        points.append(apply_pose(pose, heads))
+    pixels, pads = [], []
+    for p in points:
+        xy = view.project(p)
+        depth = (p - view.pose[:3, 3]) @ -view.pose[:3, 2]
+        pixels.append(xy)
+        focal = 0.5 * view.height / np.tan(0.5 * view.yfov)
+        pads.append(focal * (0.05 if dots else margin_m) / np.maximum(depth, 0.1) + 3)
+    for t in treadmills:
+        pixels.append(view.project(t.belt_corners()))
+        pads.append(np.full(4, 3.0))
+    xy, pad = np.concatenate(pixels), np.concatenate(pads)
+    x0 = int(np.clip(np.floor((xy[:, 0] - pad).min()), 0, view.width))
+    x1 = int(np.clip(np.ceil((xy[:, 0] + pad).max()), 0, view.width))
+    y0 = int(np.clip(np.floor((xy[:, 1] - pad).min()), 0, view.height))
+    y1 = int(np.clip(np.ceil((xy[:, 1] + pad).max()), 0, view.height))
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        return 0, 0, view.width, view.height
+    return x0, y0, x1, y1
+
+
+class _SkinnedFigure:
+    """A body mesh on the stage whose vertices are skinned a chunk of frames at a time."""
+
+    def __init__(self, stage: Stage, figure: Figure, root: np.ndarray, pose: np.ndarray):
+        from stimuli.render.dynamic import DynamicMesh
+
+        self.figure, self.root = figure, root
+        n_v = figure.body.n_vertices
+        self.buffer = np.empty((min(SKIN_CHUNK, len(root)), n_v, 3), np.float64)
+        self.start = -1
+        self._fill(0)
+        self.mesh = DynamicMesh(self.buffer[0], figure.body.faces, grey_material())
+        stage.add(self.mesh.mesh, pose=pose)
+
+    def _fill(self, start: int) -> None:
+        stop = min(start + len(self.buffer), len(self.root))
+        self.figure.body.skin(self.figure.rotations[start:stop], self.root[start:stop], out=self.buffer[:stop - start])
+        self.start = start
+
+    def set_frame(self, i: int) -> None:
+        if not self.start <= i < self.start + len(self.buffer):
+            self._fill(i)
+        self.mesh.update(self.buffer[i - self.start])

@@ -1,0 +1,47 @@
+"""Text labels (A, B, …) drawn over the frames, above each figure.
+
+The labels never move, so they are rasterised once per clip (Pillow, anti-aliased) into an
+alpha mask and blended into each frame with numpy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from stimuli.render.scene import hex_colour
+
+
+def _text_colour(background: str) -> tuple[int, int, int]:
+    """Black on light backgrounds, white on dark ones."""
+    return (0, 0, 0) if sum(hex_colour(background)) > 1.5 else (255, 255, 255)
+
+
+class LabelOverlay:
+    """Labels centred horizontally over each figure's slot, near the top of the frame."""
+
+    def __init__(self, view, labels: list[str], offsets: list[np.ndarray], background: str):
+        w, h = view.width, view.height
+        mask = Image.new("L", (w, h), 0)
+        draw = ImageDraw.Draw(mask)
+        font = ImageFont.load_default(size=max(10, int(0.075 * h)))
+        for label, offset in zip(labels, offsets):
+            if not label:
+                continue
+            x, _ = view.project(np.asarray(offset, float))
+            draw.text((float(x), 0.03 * h), label, fill=255, font=font, anchor="mt")
+        self.alpha = (np.asarray(mask, np.float32) / 255.0)[..., None]
+        rows, cols = np.nonzero(self.alpha[..., 0])
+        self.box = (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1) if rows.size else None
+        self.colour = np.array(_text_colour(background), np.float32)
+
+    def apply(self, frame: np.ndarray) -> np.ndarray:
+        """Blend the labels into ``frame`` (returns a new array)."""
+        if self.box is None:
+            return frame
+        r0, r1, c0, c1 = self.box
+        out = frame.copy()
+        a = self.alpha[r0:r1, c0:c1]
+        region = out[r0:r1, c0:c1].astype(np.float32)
+        out[r0:r1, c0:c1] = (region * (1 - a) + self.colour * a + 0.5).astype(np.uint8)
+        return out

@@ -1,0 +1,66 @@
+"""``manifest.csv``: one row per rendered clip (DESIGN.md columns), written after every clip.
+
+Columns: ``stimulus_id, file, sha256, width, height, fps, n_frames, duration_s, layout,
+<factor columns>, left, right`` (two alternatives) or ``positions`` (k > 2), ``practice``, then
+``kind, poster, inputs_hash``. ``file`` and ``poster`` are relative to the manifest's folder.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from stimuli.fileio import atomic_write_text, csv_text
+
+MANIFEST = "manifest.csv"
+
+
+def manifest_row(protocol, stimulus, look, info, out_dir: Path, poster: Path, digest: str) -> dict[str, object]:
+    """The manifest row of one finished clip."""
+    row: dict[str, object] = {
+        "stimulus_id": stimulus.stimulus_id, "file": info.path.relative_to(out_dir).as_posix(),
+        "sha256": info.sha256, "width": look.width, "height": look.height, "fps": look.fps,
+        "n_frames": info.n_frames, "duration_s": look.duration_s, "layout": look.layout,
+    }
+    for factor in protocol.factors:
+        if factor.role != "alternatives":
+            row[factor.name] = stimulus.levels.get(factor.name, "")
+    alternatives = protocol.factors_with_role("alternatives")
+    if alternatives and len(alternatives[0].levels) == 2:
+        row["left"], row["right"] = stimulus.arrangement
+    elif alternatives:
+        row["positions"] = "|".join(stimulus.arrangement)
+    row |= {"practice": int(stimulus.practice), "kind": stimulus.kind,
+            "poster": poster.relative_to(out_dir).as_posix(), "inputs_hash": digest}
+    return row
+
+
+def read_manifest(out_dir: str | Path) -> dict[str, dict[str, str]]:
+    """Rows of an existing manifest by stimulus id ({} when there is none)."""
+    path = Path(out_dir) / MANIFEST
+    if not path.exists():
+        return {}
+    with open(path, newline="", encoding="utf-8") as handle:
+        return {row["stimulus_id"]: row for row in csv.DictReader(handle)}
+
+
+def write_manifest(out_dir: str | Path, rows: list[dict[str, object]]) -> Path:
+    """Write the manifest atomically, rows in the given order."""
+    path = Path(out_dir) / MANIFEST
+    atomic_write_text(path, csv_text(rows))
+    return path
+
+
+def verify_manifest(out_dir: str | Path) -> list[str]:
+    """Problems found: missing files or SHA-256 mismatches (an empty list means all verified)."""
+    from stimuli.render.video import sha256_file
+
+    out_dir = Path(out_dir)
+    problems = []
+    for sid, row in read_manifest(out_dir).items():
+        path = out_dir / row["file"]
+        if not path.exists():
+            problems.append(f"{sid}: {row['file']} is missing")
+        elif sha256_file(path) != row["sha256"]:
+            problems.append(f"{sid}: {row['file']} does not match its sha256 in {MANIFEST}")
+    return problems

@@ -1,0 +1,195 @@
+"""``render_protocol``: every stimulus of a protocol's design as a clip, in parallel, resumable.
+
+Output folder: ``clips/<stimulus_id>.mp4``, ``posters/<stimulus_id>.png``, ``manifest.csv`` and
+``contact_sheet.png``. A clip whose inputs hash (stimulus, actors, gaits, look, renderer version)
+and file hash match the existing manifest is not rendered again. The manifest is rewritten after
+every finished clip, so an interrupted run keeps what it finished; clips are written under
+temporary names and renamed, so an interruption never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from multiprocessing import get_context
+from pathlib import Path
+
+from stimuli.errors import StimuliError
+from stimuli.render.clip import Look
+from stimuli.render.manifest import manifest_row, read_manifest, write_manifest
+from stimuli.render.settings import inputs_hash, look_for
+
+SOURCES = ("protocol", "procedural")
+
+
+@dataclass(frozen=True)
+class Job:
+    stimulus: object
+    look: Look
+    digest: str
+    clip: Path
+    poster: Path
+
+
+@dataclass
+class RenderReport:
+    out_dir: Path
+    manifest: Path | None = None
+    rendered: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    contact_sheet: Path | None = None
+
+    def summary(self) -> str:
+        return (f"{len(self.rendered)} rendered, {len(self.skipped)} unchanged, {len(self.failed)} not renderable"
+                f" → {self.out_dir}")
+
+
+def select(stimuli: list, only: str | list[str] | None, limit: int | None) -> list:
+    """Stimuli whose id contains one of ``only`` (comma-separated or a list), then the first ``limit``."""
+    if only:
+        wanted = [w.strip() for w in (only.split(",") if isinstance(only, str) else only) if w.strip()]
+        stimuli = [s for s in stimuli if any(w in s.stimulus_id for w in wanted)]
+        if not stimuli:
+            raise StimuliError(f"--only: no stimulus id contains any of {wanted}")
+    if limit is not None:
+        if limit < 0:
+            raise StimuliError(f"--limit: expected a number of clips >= 0, got {limit}")
+        stimuli = stimuli[:limit]
+    return stimuli
+
+
+def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=False) -> list[Job]:
+    jobs = []
+    for s in stimuli:
+        look = look_for(protocol, s, resolution, fps, quick)
+        jobs.append(Job(s, look, inputs_hash(protocol, s, look), out_dir / "clips" / f"{s.stimulus_id}.mp4",
+                        out_dir / "posters" / f"{s.stimulus_id}.png"))
+    return jobs
+
+
+def is_current(job: Job, row: dict | None) -> bool:
+    """A finished clip can be kept: same inputs hash, file present with the recorded SHA-256."""
+    from stimuli.render.video import sha256_file
+
+    return bool(row) and row.get("inputs_hash") == job.digest and job.clip.exists() \
+        and sha256_file(job.clip) == row.get("sha256")
+
+
+def render_job(protocol, job: Job, source: str = "protocol") -> dict:
+    """Render one clip (any process); returns its manifest row."""
+    from stimuli.render.clip import render_frames
+    from stimuli.render.video import write_video
+
+    if source == "procedural":
+        from stimuli.render.procedural import procedural_figures as figures_for
+    else:
+        from stimuli.render.sources import protocol_figures as figures_for
+    figures = figures_for(protocol, job.stimulus, job.look)
+    look = job.look
+    info = write_video(render_frames(look, figures), job.clip, look.fps, look.width, look.height, look.n_frames,
+                       poster=job.poster)
+    return manifest_row(protocol, job.stimulus, look, info, job.clip.parents[1], job.poster, job.digest)
+
+
+def _worker_job(args):
+    protocol, job, source = args
+    try:
+        return job.stimulus.stimulus_id, render_job(protocol, job, source), None
+    except StimuliError as exc:  # a missing motion source: report it, keep rendering the rest
+        return job.stimulus.stimulus_id, None, str(exc)
+
+
+def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=None, only=None, workers=None,
+                    quick: bool = False, progress: bool = True, source: str = "protocol", strict: bool = True,
+                    sheet: bool = True) -> RenderReport:
+    """Render every test, practice and familiarization stimulus of a protocol's design.
+
+    ``strict``: raise StimuliError after rendering what can be rendered when some stimuli could
+    not be (their motion source is missing); otherwise only report them in the result.
+    """
+    from stimuli.design import build_design
+    from stimuli.protocol import load_protocol
+
+    if source not in SOURCES:
+        raise StimuliError(f"--poses: expected one of {', '.join(SOURCES)}, got {source!r}")
+    protocol = load_protocol(protocol_path)
+    out_dir = Path(out_dir)
+    design = build_design(protocol)
+    order = [s.stimulus_id for s in design.stimuli]
+    jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick)
+    previous = read_manifest(out_dir)
+    report = RenderReport(out_dir)
+    rows = {sid: row for sid, row in previous.items() if sid in order and (out_dir / row["file"]).exists()}
+    todo = []
+    for job in jobs:
+        if is_current(job, previous.get(job.stimulus.stimulus_id)):
+            report.skipped.append(job.stimulus.stimulus_id)
+        else:
+            rows.pop(job.stimulus.stimulus_id, None)
+            todo.append(job)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    report.manifest = write_manifest(out_dir, _ordered(rows, order))
+    workers = max(1, min(workers or min(2, os.cpu_count() or 1), len(todo) or 1))
+    for sid, row, error in _run(protocol, todo, source, workers, progress, protocol.name):
+        if row is not None:
+            rows[sid] = row
+            report.rendered.append(sid)
+            write_manifest(out_dir, _ordered(rows, order))
+        else:
+            report.failed[sid] = error
+    if sheet:
+        from stimuli.render.contact import contact_sheet
+
+        posters = [(sid, out_dir / rows[sid]["poster"]) for sid in _ordered_ids(rows, order)]
+        report.contact_sheet = contact_sheet(posters, out_dir / "contact_sheet.png")
+    if report.failed and strict:
+        raise StimuliError(_failure_message(protocol, report))
+    return report
+
+
+def _ordered_ids(rows: dict, order: list[str]) -> list[str]:
+    return [sid for sid in order if sid in rows]
+
+
+def _ordered(rows: dict, order: list[str]) -> list[dict]:
+    return [rows[sid] for sid in _ordered_ids(rows, order)]
+
+
+def _run(protocol, jobs: list[Job], source: str, workers: int, progress: bool, name: str):
+    """Yield (stimulus_id, row or None, error or None) as clips finish; Ctrl-C stops cleanly."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(jobs), desc=f"render {name}", unit="clip", disable=not progress or not jobs)
+    try:
+        if workers == 1:
+            for job in jobs:
+                result = _worker_job((protocol, job, source))
+                bar.update(1)
+                yield result
+            return
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            pending = {pool.submit(_worker_job, (protocol, job, source)) for job in jobs}
+            try:
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        bar.update(1)
+                        yield future.result()
+            except BaseException:
+                for future in pending:  # stop queued clips; running ones clean up their temp files
+                    future.cancel()
+                raise
+    finally:
+        bar.close()
+
+
+def _failure_message(protocol, report: RenderReport) -> str:
+    reasons: dict[str, list[str]] = {}
+    for sid, message in report.failed.items():
+        key = message.split(": ", 1)[-1]
+        reasons.setdefault(key, []).append(sid)
+    parts = [f"{len(ids)} clip(s) (e.g. {ids[0]}): {why}" for why, ids in reasons.items()]
+    return (f"{protocol.name}: {len(report.failed)} stimulus clip(s) could not be rendered; "
+            f"{len(report.rendered)} rendered, {len(report.skipped)} unchanged. " + " | ".join(parts[:4]))

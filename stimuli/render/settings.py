@@ -1,0 +1,76 @@
+"""From a protocol (plus command-line overrides) to a clip's :class:`~stimuli.render.clip.Look`,
+and the hash that decides whether a finished clip can be kept when rendering again."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import re
+
+from stimuli.errors import StimuliError
+from stimuli.render.clip import Look
+
+# Bump when a change to the renderer changes pixels: every clip is then rendered again.
+RENDER_VERSION = "1"
+QUICK_WIDTH, QUICK_FPS = 320, 15
+
+
+def parse_resolution(text: str | None) -> tuple[int, int] | None:
+    """'1280x720' → (1280, 720); None stays None.
+
+    >>> parse_resolution("640x360")
+    (640, 360)
+    """
+    if text is None:
+        return None
+    if isinstance(text, tuple):
+        return text
+    match = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", str(text))
+    if not match:
+        raise StimuliError(f"--resolution: expected WIDTHxHEIGHT such as 1280x720, got {text!r}")
+    width, height = int(match.group(1)), int(match.group(2))
+    if width % 2 or height % 2 or width < 16 or height < 16:
+        raise StimuliError(f"--resolution: width and height must be even and at least 16 (H.264 yuv420p), got {text!r}")
+    return width, height
+
+
+def _even(x: float) -> int:
+    return max(16, int(round(x / 2)) * 2)
+
+
+def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False) -> Look:
+    """The appearance of one stimulus: protocol clip settings, per-level view, overrides."""
+    clip, camera = protocol.clip, protocol.clip.camera
+    width, height = parse_resolution(resolution) or (clip.width, clip.height)
+    if quick and resolution is None:
+        width, height = QUICK_WIDTH, _even(QUICK_WIDTH * clip.height / clip.width)
+    rate = int(fps or (QUICK_FPS if quick else clip.fps))
+    if rate < 1:
+        raise StimuliError(f"--fps: expected a positive frame rate, got {fps}")
+    azimuth = camera.azimuth_deg
+    for factor in protocol.factors:  # e.g. thesis_pointlight: each PARAMETER level has its own view angle
+        level = stimulus.levels.get(factor.name)
+        view = factor.level_settings.get(level, {}).get("view_deg") if level is not None else None
+        if view is not None:
+            azimuth = float(view)
+    labels = tuple(protocol.display.labels or ())
+    return Look(layout=protocol.display.layout, width=width, height=height, fps=rate,
+                duration_s=float(clip.duration_s), azimuth_deg=azimuth, elevation_deg=camera.elevation_deg,
+                distance_m=camera.distance_m, fov_deg=camera.fov_deg, background=clip.background, labels=labels)
+
+
+def inputs_hash(protocol, stimulus, look: Look) -> str:
+    """SHA-256 over everything a clip depends on: the stimulus, its actors, gaits, look, versions."""
+    actor_ids = {stimulus.body_actor, stimulus.motion_actor, protocol.display.body} - {"", None}
+    payload = {
+        "render_version": RENDER_VERSION,
+        "stimulus": dataclasses.asdict(stimulus),
+        "actors": [a.model_dump() for a in protocol.actors if a.id in actor_ids or a.sex in stimulus.levels.values()],
+        "gaits": {k: v.model_dump() for k, v in protocol.gaits.items()},
+        "factors": [f.model_dump() for f in protocol.factors],
+        "look": dataclasses.asdict(look),
+        "loop": protocol.clip.loop,
+        "cycles": protocol.clip.cycles,
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()

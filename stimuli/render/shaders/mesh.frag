@@ -1,0 +1,71 @@
+#version 330 core
+// shapemotion: plain matte shading (wrapped Lambert + a faint highlight) instead of pyrender's PBR.
+// Same uniform names as pyrender, so its renderer binds lights and materials unchanged; the
+// result is in display space (no sRGB round trip) and costs a fraction of the PBR shader.
+struct DirectionalLight {
+    vec3 color;
+    float intensity;
+    vec3 direction;
+};
+
+struct Material {
+    vec3 emissive_factor;
+    vec4 base_color_factor;
+    float metallic_factor;
+    float roughness_factor;
+#ifdef HAS_BASE_COLOR_TEX
+    sampler2D base_color_texture;
+#endif
+};
+
+uniform Material material;
+uniform DirectionalLight directional_lights[MAX_DIRECTIONAL_LIGHTS];
+uniform int n_directional_lights;
+uniform vec3 cam_pos;
+uniform vec3 ambient_light;
+
+in vec3 frag_position;
+#ifdef NORMAL_LOC
+in vec3 frag_normal;
+#endif
+#ifdef TEXCOORD_0_LOC
+in vec2 uv_0;
+#endif
+#ifdef COLOR_0_LOC
+in vec4 color_multiplier;
+#endif
+
+out vec4 frag_color;
+
+void main()
+{
+    vec4 base = material.base_color_factor;
+#ifdef HAS_BASE_COLOR_TEX
+#ifdef TEXCOORD_0_LOC
+    base *= texture(material.base_color_texture, uv_0);
+#endif
+#endif
+#ifdef COLOR_0_LOC
+    base *= color_multiplier;
+#endif
+    vec3 v = normalize(cam_pos - frag_position);
+#ifdef NORMAL_LOC
+    vec3 n = normalize(frag_normal);
+#else
+    vec3 n = v;
+#endif
+    if (dot(n, v) < 0.0) {
+        n = -n;  // two-sided: the inside of a mouth or ear is lit like the outside
+    }
+    vec3 light = ambient_light;
+    float highlight = 0.0;
+    float shine = 1.0 - material.roughness_factor;
+    for (int i = 0; i < n_directional_lights; i++) {
+        vec3 l = -directional_lights[i].direction;
+        float wrapped = max((dot(n, l) + 0.25) / 1.25, 0.0);  // soft terminator: "soft" lights
+        light += directional_lights[i].color * directional_lights[i].intensity * wrapped;
+        vec3 h = normalize(l + v);
+        highlight += directional_lights[i].intensity * shine * 0.25 * pow(max(dot(n, h), 0.0), 32.0);
+    }
+    frag_color = vec4(clamp(base.rgb * light + vec3(highlight), 0.0, 1.0), base.a);
+}
