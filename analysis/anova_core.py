@@ -31,6 +31,9 @@ from scipy import special
 from analysis.errors import AnalysisError
 
 
+NO_VARIANCE = 1e-12  # relative to the total sum of squares: below it, a stratum is rounding noise
+
+
 def helmert_orthonormal(k: int) -> np.ndarray:
     """k × (k−1) orthonormal contrasts (normalised Helmert): columns sum to zero, unit length, orthogonal."""
     h = np.zeros((k, k - 1))
@@ -288,8 +291,15 @@ class CompiledDesign:
             ms = ss / df1
             mse = sse / df2
             F = ms / mse
+            # A stratum with no variance at all (e.g. % NoCOM + % COM = 100 in every cell, so every
+            # effect without METHOD is 0/0) holds only rounding noise: its F is undefined, not huge.
+            centred = Y - Y.mean(axis=(1, 2), keepdims=True)
+            scale = np.einsum("dnk,dnk->d", centred, centred)[:, None]
+            degenerate = ss + sse <= NO_VARIANCE * scale
+            F = np.where(degenerate, np.nan, F)
+            ss, ms = np.where(degenerate, 0.0, ss), np.where(degenerate, 0.0, ms)
             p = special.fdtrc(df1, df2, F)
-            pes = ss / (ss + sse)
+            pes = np.where(degenerate, np.nan, ss / (ss + sse))
             ges = ss / (ss + sse_strata.sum(axis=1, keepdims=True))
         out = dict(ss=ss, df1=np.broadcast_to(df1, ss.shape), df2=np.broadcast_to(df2, ss.shape), ms=ms, mse=mse,
                    F=F, p=p, eta2_partial=pes, eta2_generalized=ges, noncentrality=F * df1,

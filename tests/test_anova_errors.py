@@ -138,3 +138,24 @@ def test_level_order_categorical_and_numeric():
     d = make()
     d["A"] = d["A"].map({"a1": 10, "a2": 2, "a3": 1})
     assert run(d).levels["A"] == ("1", "2", "10")
+
+
+def test_effects_without_variance_have_no_F():
+    """% NoCOM + % COM = 100 in every cell: effects without METHOD are 0/0, never 'significant' noise."""
+    import numpy as np
+    import pandas as pd
+
+    from analysis.anova import anova
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for s in range(16):
+        for gait in ("walk", "jog"):
+            for body in ("H1", "H2", "L1", "L2"):
+                x = rng.integers(0, 5) * 25.0
+                rows += [dict(subject=s, GAIT=gait, BODY=body, METHOD="NoCOM", pct=x),
+                         dict(subject=s, GAIT=gait, BODY=body, METHOD="COM", pct=100 - x)]
+    effects = anova(pd.DataFrame(rows), "pct", "subject", within=["GAIT", "BODY", "METHOD"]).effects
+    without_method = [e for e in effects.index if "METHOD" not in e]
+    assert effects.loc[without_method, "F"].isna().all() and (effects.loc[without_method, "ss"] == 0).all()
+    assert effects.loc[[e for e in effects.index if "METHOD" in e], "F"].notna().all()
