@@ -5,6 +5,9 @@
 - :func:`ordinal_model`: cumulative-logit (proportional-odds) model of the Likert ratings
   (statsmodels ``OrderedModel``), full factorial fixed effects; participants enter only through the
   factors (statsmodels has no random effects for ordinal models), so it is a fixed-effects check;
+- :func:`choice_mixed`: logistic mixed model of 2AFC choices with a participant random intercept
+  (statsmodels ``BinomialBayesMixedGLM``, variational Bayes; Wald tests from the mean-field posterior,
+  so approximate) — the random intercept is each participant's own preference between the alternatives;
 - :func:`choice_gee`: logistic GEE (exchangeable working correlation within participant, robust SEs)
   of 2AFC choices. The outcome is "chose the first alternatives level" (e.g. NoCOM): the intercept tests
   the alternatives main effect (METHOD) and each term X tests X × METHOD.
@@ -121,10 +124,40 @@ def choice_gee(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     return table
 
 
+def choice_mixed(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
+    """Logistic mixed model of 2AFC choices (participant random intercept), variational Bayes."""
+    from statsmodels.genmod.bayes_mixed_glm import BinomialBayesMixedGLM
+
+    alt = design.alternatives
+    first = alt.levels[0]
+    frame = _trial_data(data, design, ["chosen"])
+    frame["first"] = (frame["chosen"].astype(str) == first).astype(float)
+    factors = design.between + design.within
+    model = BinomialBayesMixedGLM.from_formula(f"first ~ {_formula_rhs(factors)}",
+                                               {"participant": "0 + C(participant)"}, frame)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        # fixed start (statsmodels draws random starting SDs otherwise): same data → same numbers
+        n = model.k_fep + model.k_vcp + model.k_vc
+        fit = model.fit_vb(mean=np.zeros(n), sd=np.full(n, np.exp(-0.5)))
+    names = model.exog_names
+    params = pd.Series(fit.fe_mean, index=names)
+    cov = pd.DataFrame(np.diag(np.asarray(fit.fe_sd) ** 2), index=names, columns=names)
+    label = "logistic mixed model (variational Bayes, approximate)"
+    table = wald_terms(params, cov, label, label=lambda fs: ":".join([*fs, alt.name]))
+    from scipy import stats
+    z2 = float((params["Intercept"] / fit.fe_sd[names.index("Intercept")]) ** 2)
+    intercept = pd.DataFrame([{"model": label, "term": alt.name, "df": 1, "chi2": z2, "p": float(stats.chi2.sf(z2, 1))}])
+    table = pd.concat([intercept, table], ignore_index=True)
+    table["note"] = (f"outcome: chose {first}; participant random-intercept SD {float(np.exp(fit.vcp_mean[0])):.3f} "
+                     f"(log-odds); n = {len(frame)} answers")
+    return table
+
+
 def additional_models(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     """All additional models that fit the design's response type (empty for rankings/k-AFC votes)."""
     if design.response_type == "likert":
         return pd.concat([mixed_model(data, design), ordinal_model(data, design)], ignore_index=True)
     if design.response_type == "afc" and len(design.alternatives.levels) == 2:
-        return choice_gee(data, design)
+        return pd.concat([choice_mixed(data, design), choice_gee(data, design)], ignore_index=True)
     return pd.DataFrame(columns=["model", "term", "df", "chi2", "p", "note"])

@@ -238,6 +238,7 @@ def software_versions() -> dict:
 def render_report(context: dict, out: Path) -> str:
     """The self-contained ``report.html`` (figures inlined as base64 PNG)."""
     import jinja2
+    from markupsafe import Markup
 
     from analysis.tables import TEMPLATE_DIR
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATE_DIR)), autoescape=True,
@@ -246,7 +247,7 @@ def render_report(context: dict, out: Path) -> str:
     for s in context["sections"]:
         figs = [{"caption": caption, "png": _data_uri(next(p for p in paths if p.suffix == ".png")),
                  "files": [str(p.relative_to(out)) for p in paths]} for caption, paths in s["figures"]]
-        sections.append({**s, "figures": figs, "html": jinja2.utils.markupsafe.Markup(s["html"])})
+        sections.append({**s, "figures": figs, "html": Markup(s["html"])})
     return env.get_template("report.html.j2").render(
         summary=context["summary"], sections=sections, exclusions=context["exclusions"],
         versions=context["versions"], design=context["summary"]["design"], imported=context["summary"]["import"])

@@ -76,8 +76,10 @@ def test_exp2_report_has_figure9_and_gee(reports):
     assert all("METHOD" in e["effect"] for e in results["effects"])
     assert results["posthoc"]["METHOD"] == "NoCOM > COM"
     assert (folder / "report" / "figures" / "figure9.svg").exists()
-    gee = pd.read_csv(folder / "report" / "additional_models.csv").set_index("term")
-    assert gee.loc["METHOD", "p"] < 0.001 and gee.loc["SEX:METHOD", "p"] < 0.01
+    models = pd.read_csv(folder / "report" / "additional_models.csv").set_index(["model", "term"])
+    for model in ("logistic GEE (exchangeable, robust SE)", "logistic mixed model (variational Bayes, approximate)"):
+        assert models.loc[(model, "METHOD"), "p"] < 0.001 and models.loc[(model, "SEX:METHOD"), "p"] < 0.01
+        assert models.loc[(model, "BODY:METHOD"), "df"] == 3
 
 
 def test_vote_and_ranking_reports(reports):
