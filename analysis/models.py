@@ -96,30 +96,37 @@ def ordinal_model(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     return table
 
 
+def _choice_frame(data: pd.DataFrame, design: DesignInfo) -> tuple[pd.DataFrame, str]:
+    """Test answers with ``first`` = 1 when the first alternatives level (e.g. NoCOM) was chosen."""
+    first = design.alternatives.levels[0]
+    frame = _trial_data(data, design, ["chosen"])
+    frame["first"] = (frame["chosen"].astype(str) == first).astype(float)
+    return frame, f"first ~ {_formula_rhs(design.between + design.within)}"
+
+
+def _choice_terms(params: pd.Series, cov: pd.DataFrame, model: str, design: DesignInfo) -> pd.DataFrame:
+    """Wald tests of a choice model: the intercept is the alternatives main effect, term X is X × alternatives."""
+    from scipy import stats
+    alt = design.alternatives.name
+    table = wald_terms(params, cov, model, label=lambda fs: ":".join([*fs, alt]))
+    z2 = float(params["Intercept"] ** 2 / cov.loc["Intercept", "Intercept"])
+    intercept = pd.DataFrame([{"model": model, "term": alt, "df": 1, "chi2": z2, "p": float(stats.chi2.sf(z2, 1))}])
+    return pd.concat([intercept, table], ignore_index=True)
+
+
 def choice_gee(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     """Logistic GEE of 2AFC choices; terms are reported as their interaction with the alternatives factor."""
     import statsmodels.api as sm
     import statsmodels.formula.api as smf
 
-    alt = design.alternatives
-    first = alt.levels[0]
-    frame = _trial_data(data, design, ["chosen"])
-    frame["first"] = (frame["chosen"].astype(str) == first).astype(float)
-    factors = design.between + design.within
+    frame, formula = _choice_frame(data, design)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit = smf.gee(f"first ~ {_formula_rhs(factors)}", "participant", frame, family=sm.families.Binomial(),
+        fit = smf.gee(formula, "participant", frame, family=sm.families.Binomial(),
                       cov_struct=sm.cov_struct.Exchangeable()).fit()
-    params, cov = fit.params, fit.cov_params()
-    table = wald_terms(params, cov, "logistic GEE (exchangeable, robust SE)",
-                       label=lambda fs: ":".join([*fs, alt.name]))
-    from scipy import stats
-    z = float(params["Intercept"] / np.sqrt(cov.loc["Intercept", "Intercept"]))
-    intercept = pd.DataFrame([{"model": table["model"].iloc[0] if len(table) else "logistic GEE", "term": alt.name,
-                               "df": 1, "chi2": z * z, "p": float(stats.chi2.sf(z * z, 1))}])
-    table = pd.concat([intercept, table], ignore_index=True)
-    odds = float(np.exp(params["Intercept"]))
-    table["note"] = (f"outcome: chose {first}; odds {odds:.2f} at the grand mean "
+    table = _choice_terms(fit.params, fit.cov_params(), "logistic GEE (exchangeable, robust SE)", design)
+    odds = float(np.exp(fit.params["Intercept"]))
+    table["note"] = (f"outcome: chose {design.alternatives.levels[0]}; odds {odds:.2f} at the grand mean "
                      f"(P = {odds / (1 + odds):.3f}); n = {len(frame)} answers")
     return table
 
@@ -128,29 +135,19 @@ def choice_mixed(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     """Logistic mixed model of 2AFC choices (participant random intercept), variational Bayes."""
     from statsmodels.genmod.bayes_mixed_glm import BinomialBayesMixedGLM
 
-    alt = design.alternatives
-    first = alt.levels[0]
-    frame = _trial_data(data, design, ["chosen"])
-    frame["first"] = (frame["chosen"].astype(str) == first).astype(float)
-    factors = design.between + design.within
-    model = BinomialBayesMixedGLM.from_formula(f"first ~ {_formula_rhs(factors)}",
-                                               {"participant": "0 + C(participant)"}, frame)
+    frame, formula = _choice_frame(data, design)
+    model = BinomialBayesMixedGLM.from_formula(formula, {"participant": "0 + C(participant)"}, frame)
+    n = model.k_fep + model.k_vcp + model.k_vc
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         # fixed start (statsmodels draws random starting SDs otherwise): same data → same numbers
-        n = model.k_fep + model.k_vcp + model.k_vc
         fit = model.fit_vb(mean=np.zeros(n), sd=np.full(n, np.exp(-0.5)))
     names = model.exog_names
-    params = pd.Series(fit.fe_mean, index=names)
     cov = pd.DataFrame(np.diag(np.asarray(fit.fe_sd) ** 2), index=names, columns=names)
-    label = "logistic mixed model (variational Bayes, approximate)"
-    table = wald_terms(params, cov, label, label=lambda fs: ":".join([*fs, alt.name]))
-    from scipy import stats
-    z2 = float((params["Intercept"] / fit.fe_sd[names.index("Intercept")]) ** 2)
-    intercept = pd.DataFrame([{"model": label, "term": alt.name, "df": 1, "chi2": z2, "p": float(stats.chi2.sf(z2, 1))}])
-    table = pd.concat([intercept, table], ignore_index=True)
-    table["note"] = (f"outcome: chose {first}; participant random-intercept SD {float(np.exp(fit.vcp_mean[0])):.3f} "
-                     f"(log-odds); n = {len(frame)} answers")
+    table = _choice_terms(pd.Series(fit.fe_mean, index=names), cov,
+                          "logistic mixed model (variational Bayes, approximate)", design)
+    table["note"] = (f"outcome: chose {design.alternatives.levels[0]}; participant random-intercept SD "
+                     f"{float(np.exp(fit.vcp_mean[0])):.3f} (log-odds); n = {len(frame)} answers")
     return table
 
 
