@@ -39,13 +39,18 @@ def _check_number(name: str, value, low: float, high: float) -> float:
     return value
 
 
+BACKENDS = ("anny", "smplx")
+
+
 def fit_body(sex, height_m, bmi, *, waist_m=None, hip_m=None, chest_m=None, age_years: float = 30.0,
-             body_id: str | None = None, on_unreachable: str = "raise", use_cache: bool = True) -> Body:
+             body_id: str | None = None, on_unreachable: str = "raise", use_cache: bool = True,
+             backend_name: str = "anny", smplx_dir=None) -> Body:
     """A body of the given sex, height (m) and BMI (kg/m²), optionally waist/hip/chest girths (m).
 
     Raises BodyFitError (with ``.nearest``) when the target is out of reach of the body model
     (|height error| > 1 cm or |BMI error| > 0.5) unless ``on_unreachable="nearest"``, which returns
-    the nearest body with ``fit.reachable`` False.
+    the nearest body with ``fit.reachable`` False. ``backend_name="smplx"`` with ``smplx_dir`` (a
+    folder of SMPL-X model files) fits SMPL-X betas instead (height and BMI only, not cached).
 
     Examples
     --------
@@ -55,6 +60,15 @@ def fit_body(sex, height_m, bmi, *, waist_m=None, hip_m=None, chest_m=None, age_
     """
     if on_unreachable not in ("raise", "nearest"):
         raise ValueError("on_unreachable must be 'raise' or 'nearest'")
+    if backend_name not in BACKENDS:
+        raise StimuliError(f"unknown body backend {backend_name!r}; known backends: {', '.join(BACKENDS)}")
+    if backend_name == "smplx":
+        if smplx_dir is None:
+            raise StimuliError("the smplx backend needs the folder of your SMPL-X model files (--smplx-dir)")
+        from stimuli.bodies.smplx_backend import fit_smplx_body
+
+        return fit_smplx_body(normalise_sex(sex), _check_number("height_m", height_m, 0.0, 10.0),
+                              _check_number("bmi", bmi, 0.0, 1000.0), smplx_dir, body_id, on_unreachable)
     targets = Targets(
         sex=normalise_sex(sex), height_m=_check_number("height_m", height_m, 0.0, 10.0),
         bmi=_check_number("bmi", bmi, 0.0, 1000.0),

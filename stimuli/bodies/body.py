@@ -11,7 +11,7 @@ import numpy as np
 from stimuli.bodies import backend, frame
 from stimuli.bodies.measure import Anthropometry, max_girth, measure, unique_edges
 from stimuli.bodies.rig import Rig
-from stimuli.bodies.segments import Segment, build_segments, face_segments, segment_labels
+from stimuli.bodies.segments import ANNY, Segment, SkeletonProfile, build_segments, face_segments, segment_labels
 
 # Bones whose flesh the chest girth may cross (not the shoulders or arms).
 _CHEST_SEGMENT = "spine"
@@ -45,6 +45,7 @@ class Body:
     anthropometry: Anthropometry
     segments: list[Segment]
     fit: FitReport
+    skinner: object = dataclasses.field(default=None, repr=False)  # None: Anny's skinning
 
     @property
     def n_vertices(self) -> int:
@@ -83,7 +84,8 @@ class Body:
         with torch.no_grad():
             for start in range(0, n_frames, chunk):  # bounded memory for long clips
                 part = torch.as_tensor(transforms[start:start + chunk], dtype=torch.float64)
-                out[start:start + chunk] = backend.skin(rest, part).numpy()
+                skinned = (self.skinner or backend.skin)(rest, part)
+                out[start:start + chunk] = skinned.numpy()
         return out
 
     def to_trimesh(self):
@@ -112,10 +114,8 @@ def mesh_parts() -> dict[str, object]:
     topo = backend.topology()
     faces = topo["faces"]
     face_seg = face_segments(faces, topo["weights"], topo["indices"], topo["bone_names"])
-    labels = segment_labels()
-    trunk = faces[face_seg == labels.index(_CHEST_SEGMENT)]
-    hips = faces[np.isin(face_seg, [labels.index(s) for s in _HIP_SEGMENTS])]
-    return {**topo, "face_seg": face_seg, "trunk_edges": unique_edges(trunk), "hip_edges": unique_edges(hips)}
+    trunk_edges, hip_edges = girth_edges(faces, face_seg)
+    return {**topo, "face_seg": face_seg, "trunk_edges": trunk_edges, "hip_edges": hip_edges}
 
 
 def project_arrays(anny_out: dict, i: int) -> dict[str, np.ndarray]:
@@ -129,9 +129,18 @@ def project_arrays(anny_out: dict, i: int) -> dict[str, np.ndarray]:
     }
 
 
-def _landmarks(heads: np.ndarray, names: list[str]) -> dict[str, float]:
-    hip = 0.5 * (heads[names.index("upperleg01.L"), 1] + heads[names.index("upperleg01.R"), 1])
-    return {"hip_joint": float(hip), "chest": float(heads[names.index("spine01"), 1])}
+def _landmarks(heads: np.ndarray, names: list[str], profile: SkeletonProfile = ANNY) -> dict[str, float]:
+    left, right = profile.hip_joints
+    hip = 0.5 * (heads[names.index(left), 1] + heads[names.index(right), 1])
+    return {"hip_joint": float(hip), "chest": float(heads[names.index(profile.chest_joint), 1])}
+
+
+def girth_edges(faces: np.ndarray, face_seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh edges of the trunk (chest girth) and of the pelvis + thighs (hip girth)."""
+    labels = segment_labels()
+    trunk = faces[face_seg == labels.index(_CHEST_SEGMENT)]
+    hips = faces[np.isin(face_seg, [labels.index(s) for s in _HIP_SEGMENTS])]
+    return unique_edges(trunk), unique_edges(hips)
 
 
 def candidate_girths(anny_out: dict, i: int) -> dict[str, float]:
@@ -162,14 +171,21 @@ def build_body(body_id: str, sex: str, targets: dict, phenotype: dict[str, float
     """Assemble a Body from row ``i`` of an Anny evaluation."""
     parts = mesh_parts()
     arrays = project_arrays(anny_out, i)
-    names = list(parts["bone_names"])
-    parents = np.asarray(parts["bone_parents"])
-    v, heads = arrays["vertices"], arrays["heads"]
+    return assemble_body(
+        body_id, sex, targets, phenotype, arrays["vertices"], parts["faces"], list(parts["bone_names"]),
+        np.asarray(parts["bone_parents"]), arrays["heads"], arrays["rotations"], float(anny_out["waist"][i]), parts,
+        fit, ANNY)
+
+
+def assemble_body(body_id, sex, targets, phenotype, vertices, faces, names, parents, heads, rotations, waist_m,
+                  parts, fit, profile, skinner=None) -> Body:
+    """A Body from project-frame arrays of any backend. ``parts`` holds ``face_seg``, ``trunk_edges``
+    and ``hip_edges``; ``skinner`` replaces Anny's skinning (other backends)."""
     rig = Rig(names=names, parents=parents, rest_heads=heads,
-              rest_tails=rest_tails(heads, parents, arrays["rotations"], v), rest_rotations=arrays["rotations"])
-    anthro = measure(v, parts["faces"], float(anny_out["waist"][i]), _landmarks(heads, names),
-                     parts["trunk_edges"], parts["hip_edges"], backend.ANNY_DENSITY)
-    segments = build_segments(anthro.mass_kg, heads, names, v, parts["faces"], parts["face_seg"],
-                              backend.ANNY_DENSITY)
-    return Body(body_id=body_id, sex=sex, targets=targets, phenotype=phenotype, vertices=v, faces=parts["faces"],
-                rig=rig, anthropometry=anthro, segments=segments, fit=fit)
+              rest_tails=rest_tails(heads, parents, rotations, vertices), rest_rotations=rotations)
+    anthro = measure(vertices, faces, waist_m, _landmarks(heads, names, profile), parts["trunk_edges"],
+                     parts["hip_edges"], backend.ANNY_DENSITY)
+    segments = build_segments(anthro.mass_kg, heads, names, vertices, faces, parts["face_seg"],
+                              backend.ANNY_DENSITY, profile)
+    return Body(body_id=body_id, sex=sex, targets=targets, phenotype=phenotype, vertices=vertices, faces=faces,
+                rig=rig, anthropometry=anthro, segments=segments, fit=fit, skinner=skinner)

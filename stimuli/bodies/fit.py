@@ -42,6 +42,9 @@ BOUNDS = {"height": (0.0, 1.0), "build": (0.0, BUILD_MAX), "muscle_shift": (-0.3
 # only use the freedom left; the extra parameters are pulled towards their defaults.
 SCALE = {"height_m": 0.0002, "bmi": 0.1, "waist_m": 0.05, "hip_m": 0.05, "chest_m": 0.05}
 REGULARISER = {"muscle_shift": 0.3, "proportions": 0.5}
+# When a target is out of reach, a second pass weighs BMI 100 times less, so that the nearest body
+# keeps the height and only then gets as close to the BMI as the model allows.
+NEAREST_SCALE = {**SCALE, "bmi": 10.0}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,10 +140,10 @@ def measure_batch(targets: Targets, x: np.ndarray, names) -> tuple[list[dict[str
     return rows, out
 
 
-def residuals(targets: Targets, measured: dict[str, float], x_row: np.ndarray, names) -> np.ndarray:
+def residuals(targets: Targets, measured: dict[str, float], x_row: np.ndarray, names, scale=SCALE) -> np.ndarray:
     """Scaled residual vector of one candidate."""
     wanted = {"height_m": targets.height_m, "bmi": targets.bmi, **targets.girths}
-    r = [(measured[k] - v) / SCALE[k] for k, v in wanted.items()]
+    r = [(measured[k] - v) / scale[k] for k, v in wanted.items()]
     defaults = {"muscle_shift": 0.0, "proportions": 0.5}
     r += [(x_row[names.index(k)] - defaults[k]) / REGULARISER[k] for k in names if k in REGULARISER]
     return np.array(r)
@@ -180,35 +183,53 @@ def fit(targets: Targets, max_iterations: int = 40) -> FitResult:
     lower = np.array([BOUNDS[n][0] for n in names])
     upper = np.array([BOUNDS[n][1] for n in names])
     x = np.array(list(start_point(targets)) + ([0.0, 0.5] if targets.girths else []))
-    lam, evaluations = 1e-3, 0
-    r0, jac, measured = _linearise(targets, x, names, upper)
-    evaluations += len(x) + 1
-    iteration = 0
-    while iteration < max_iterations and not _converged(targets, measured, names):
+    x, measured, iteration, evaluations = solve(
+        lambda point: _linearise(targets, point, names, upper), x, lower, upper,
+        lambda m: _converged(targets, m, names), max_iterations)
+    if not within_tolerance(targets, measured):
+        x, measured, more, extra = solve(
+            lambda point: _linearise(targets, point, names, upper, scale=NEAREST_SCALE), x, lower, upper,
+            lambda m: False, max_iterations)
+        iteration, evaluations = iteration + more, evaluations + extra
+    params = dict(zip(names, map(float, x)))
+    pheno = {k: float(v[0]) for k, v in phenotypes(targets, x, names).items()}
+    return FitResult(phenotype=pheno, parameters=params, measured=measured,
+                     reachable=within_tolerance(targets, measured), iterations=iteration,
+                     evaluations=evaluations * (len(names) + 1), seconds=time.perf_counter() - start_time)
+
+
+def solve(linearise, x, lower, upper, converged, max_iterations: int = 40):
+    """Bounded Levenberg–Marquardt. ``linearise(x) -> (residuals, jacobian, measured)``;
+    ``converged(measured)`` stops early. Returns (x, measured, iterations, evaluations of linearise)."""
+    lam = 1e-3
+    r0, jac, measured = linearise(x)
+    evaluations, iteration = 1, 0
+    while iteration < max_iterations and not converged(measured):
         iteration += 1
         delta = _bounded_step(jac, r0, lam, x, lower, upper)
         if np.max(np.abs(delta)) < 1e-7:
             break
         x_new = np.clip(x + delta, lower, upper)
-        r_new, jac_new, measured_new = _linearise(targets, x_new, names, upper)
-        evaluations += len(x) + 1
+        r_new, jac_new, measured_new = linearise(x_new)
+        evaluations += 1
         if r_new @ r_new < r0 @ r0:
+            gain = 1.0 - (r_new @ r_new) / (r0 @ r0)
             x, r0, jac, measured, lam = x_new, r_new, jac_new, measured_new, lam / 3.0
+            if gain < 1e-6:  # stalled at the best point (a bound): nothing left to gain
+                break
         else:
             lam *= 4.0
-    params = dict(zip(names, map(float, x)))
-    pheno = {k: float(v[0]) for k, v in phenotypes(targets, x, names).items()}
-    return FitResult(phenotype=pheno, parameters=params, measured=measured,
-                     reachable=within_tolerance(targets, measured), iterations=iteration,
-                     evaluations=evaluations, seconds=time.perf_counter() - start_time)
+            if lam > 1e8:
+                break
+    return x, measured, iteration, evaluations
 
 
-def _linearise(targets: Targets, x, names, upper, step: float = 1e-4):
+def _linearise(targets: Targets, x, names, upper, step: float = 1e-4, scale=SCALE):
     """Residuals, forward-difference Jacobian and measurements at ``x``: one Anny batch of len(x)+1."""
     probes = np.array([x] + [x + _fd_step(x, k, step, upper) for k in range(len(x))])
     rows, _ = measure_batch(targets, probes, names)
-    r0 = residuals(targets, rows[0], x, names)
-    jac = np.stack([(residuals(targets, rows[k + 1], probes[k + 1], names) - r0) / (probes[k + 1, k] - x[k])
+    r0 = residuals(targets, rows[0], x, names, scale)
+    jac = np.stack([(residuals(targets, rows[k + 1], probes[k + 1], names, scale) - r0) / (probes[k + 1, k] - x[k])
                     for k in range(len(x))], axis=1)
     return r0, jac, rows[0]
 

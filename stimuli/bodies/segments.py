@@ -1,6 +1,7 @@
 """Body segments: SPEC §3 Table 1 (Vyas et al. 2023, appendix) on an Anny body, plus mesh-based values.
 
-Each segment runs from a proximal to a distal joint (Anny bone heads, project frame). Table-based
+Each segment runs from a proximal to a distal joint (bone heads, project frame; the joints of each
+skeleton — Anny's, SMPL-X's — are in its ``SkeletonProfile``). Table-based
 values: mass m′ = W · X_w and centre of mass c′ = c + l · X_l · u, where c is the segment's
 geometric centre (midpoint of the two joints), l its length and u the unit vector from the
 proximal to the distal joint (so a negative X_l moves the CoM towards the proximal joint).
@@ -33,33 +34,91 @@ TABLE1 = {
 }
 SEGMENT_ORDER = ("pelvis", "spine", "head", "upper_arm", "lower_arm", "hand", "upper_leg", "lower_leg", "foot")
 
-# Proximal and distal joints (bone heads; "{s}" is the side). "top_of_head" is the highest vertex
-# above the head bone; "hip_centre" the midpoint of the two hip joints.
-JOINTS = {
-    "pelvis": ("spine04", "hip_centre"),
-    "spine": ("spine04", "neck01"),
-    "head": ("neck01", "top_of_head"),
-    "upper_arm": ("upperarm01.{s}", "lowerarm01.{s}"),
-    "lower_arm": ("lowerarm01.{s}", "wrist.{s}"),
-    "hand": ("wrist.{s}", "finger3-1.{s}"),
-    "upper_leg": ("upperleg01.{s}", "lowerleg01.{s}"),
-    "lower_leg": ("lowerleg01.{s}", "foot.{s}"),
-    "foot": ("foot.{s}", "toe2-1.{s}"),
-}
+@dataclasses.dataclass(frozen=True)
+class SkeletonProfile:
+    """What segments mean on one skeleton: segment ends, which bones' flesh goes where, landmarks.
 
-# Which segment each Anny bone's flesh belongs to (first matching pattern wins).
-_BONE_PATTERNS = (
-    (r"^(root|pelvis\.|spine05)", "pelvis"),
-    (r"^(spine0[1-4]|clavicle|shoulder|breast)", "spine"),
-    (r"^(neck|head|eye|jaw|tongue|special|oris|levator|temporalis|risorius|orbicularis)", "head"),
-    (r"^upperarm", "upper_arm"),
-    (r"^lowerarm", "lower_arm"),
-    (r"^(wrist|finger|metacarpal|thumb)", "hand"),
-    (r"^upperleg", "upper_leg"),
-    (r"^lowerleg", "lower_leg"),
-    (r"^(foot|toe)", "foot"),
+    ``joints``: segment → (proximal, distal) joint names with ``{s}`` for the side; besides bone
+    names, "hip_centre" (midpoint of ``hip_joints``) and "top_of_head" (highest vertex above
+    ``head_joint``). ``bone_patterns``: (regex on the side-less bone name, segment), first match
+    wins. Sides are a ".L"/".R" suffix (Anny) or a "left_"/"right_" prefix (SMPL family).
+    """
+
+    name: str
+    joints: dict
+    bone_patterns: tuple
+    side_prefix: bool
+    hip_joints: tuple
+    chest_joint: str
+    head_joint: str
+
+    def side_name(self, side: str) -> str:
+        return {"L": "left", "R": "right"}[side] if self.side_prefix else side
+
+    def split_side(self, bone: str) -> tuple[str, str]:
+        """(bone name without its side, 'L'/'R'/'')."""
+        if self.side_prefix:
+            m = re.match(r"^(left|right)_(.*)$", bone)
+            return (m.group(2), "L" if m.group(1) == "left" else "R") if m else (bone, "")
+        m = re.match(r"^(.*)\.([LR])$", bone)
+        return (m.group(1), m.group(2)) if m else (bone, "")
+
+
+ANNY = SkeletonProfile(
+    name="anny",
+    joints={
+        "pelvis": ("spine04", "hip_centre"),
+        "spine": ("spine04", "neck01"),
+        "head": ("neck01", "top_of_head"),
+        "upper_arm": ("upperarm01.{s}", "lowerarm01.{s}"),
+        "lower_arm": ("lowerarm01.{s}", "wrist.{s}"),
+        "hand": ("wrist.{s}", "finger3-1.{s}"),
+        "upper_leg": ("upperleg01.{s}", "lowerleg01.{s}"),
+        "lower_leg": ("lowerleg01.{s}", "foot.{s}"),
+        "foot": ("foot.{s}", "toe2-1.{s}"),
+    },
+    bone_patterns=(
+        (r"^(root|pelvis$|spine05)", "pelvis"),
+        (r"^(spine0[1-4]|clavicle|shoulder|breast)", "spine"),
+        (r"^(neck|head|eye|jaw|tongue|special|oris|levator|temporalis|risorius|orbicularis)", "head"),
+        (r"^upperarm", "upper_arm"),
+        (r"^lowerarm", "lower_arm"),
+        (r"^(wrist|finger|metacarpal|thumb)", "hand"),
+        (r"^upperleg", "upper_leg"),
+        (r"^lowerleg", "lower_leg"),
+        (r"^(foot|toe)", "foot"),
+    ),
+    side_prefix=False, hip_joints=("upperleg01.L", "upperleg01.R"), chest_joint="spine01", head_joint="head",
 )
 
+# The SMPL-X joint tree (public joint names, in model order); the "left_/right_" joints are the
+# joints at the proximal end of the flesh they move (shoulder = upper arm, hip = thigh).
+SMPLX = SkeletonProfile(
+    name="smplx",
+    joints={
+        "pelvis": ("spine1", "hip_centre"),
+        "spine": ("spine1", "neck"),
+        "head": ("neck", "top_of_head"),
+        "upper_arm": ("{s}_shoulder", "{s}_elbow"),
+        "lower_arm": ("{s}_elbow", "{s}_wrist"),
+        "hand": ("{s}_wrist", "{s}_middle1"),
+        "upper_leg": ("{s}_hip", "{s}_knee"),
+        "lower_leg": ("{s}_knee", "{s}_ankle"),
+        "foot": ("{s}_ankle", "{s}_foot"),
+    },
+    bone_patterns=(
+        (r"^pelvis$", "pelvis"),
+        (r"^(spine\d|collar)", "spine"),
+        (r"^(neck|head|jaw|eye)", "head"),
+        (r"^shoulder$", "upper_arm"),
+        (r"^elbow$", "lower_arm"),
+        (r"^(wrist|index|middle|pinky|ring|thumb)", "hand"),
+        (r"^hip$", "upper_leg"),
+        (r"^knee$", "lower_leg"),
+        (r"^(ankle|foot)$", "foot"),
+    ),
+    side_prefix=True, hip_joints=("left_hip", "right_hip"), chest_joint="spine3", head_joint="head",
+)
 
 @dataclasses.dataclass(frozen=True)
 class Segment:
@@ -95,19 +154,21 @@ class Segment:
         return row
 
 
-def bone_segment(bone: str) -> tuple[str, str]:
-    """(segment name, side) for an Anny bone name.
+def bone_segment(bone: str, profile: SkeletonProfile = ANNY) -> tuple[str, str]:
+    """(segment name, side) for a bone name of a skeleton.
 
     >>> bone_segment("lowerleg02.L")
     ('lower_leg', 'L')
     >>> bone_segment("spine03")
     ('spine', '')
+    >>> bone_segment("right_elbow", SMPLX)
+    ('lower_arm', 'R')
     """
-    side = bone[-1] if re.search(r"\.[LR]$", bone) else ""
-    for pattern, segment in _BONE_PATTERNS:
-        if re.match(pattern, bone):
+    base, side = profile.split_side(bone)
+    for pattern, segment in profile.bone_patterns:
+        if re.match(pattern, base):
             return segment, side if segment not in ("pelvis", "spine", "head") else ""
-    raise ValueError(f"Anny bone {bone!r} has no segment; add it to stimuli.bodies.segments._BONE_PATTERNS")
+    raise ValueError(f"{profile.name} bone {bone!r} has no segment; add it to its SkeletonProfile.bone_patterns")
 
 
 def segment_labels() -> list[str]:
@@ -118,10 +179,14 @@ def segment_labels() -> list[str]:
     return labels
 
 
-def face_segments(faces: np.ndarray, weights: np.ndarray, indices: np.ndarray, bone_names: list[str]) -> np.ndarray:
-    """Segment index (into :func:`segment_labels`) of every triangle: the segment with most skinning weight."""
+def face_segments(faces: np.ndarray, weights: np.ndarray, indices: np.ndarray, bone_names: list[str],
+                  profile: SkeletonProfile = ANNY) -> np.ndarray:
+    """Segment index (into :func:`segment_labels`) of every triangle: the segment with most skinning weight.
+
+    ``weights``/``indices``: (V, K) sparse skinning weights and the bones they refer to.
+    """
     labels = segment_labels()
-    bone_to_seg = np.array([labels.index(_label(*bone_segment(b))) for b in bone_names])
+    bone_to_seg = np.array([labels.index(_label(*bone_segment(b, profile))) for b in bone_names])
     vertex_seg_weight = np.zeros((weights.shape[0], len(labels)))
     np.add.at(vertex_seg_weight, (np.arange(weights.shape[0])[:, None], bone_to_seg[indices]), weights)
     return np.argmax(vertex_seg_weight[faces].sum(axis=1), axis=1)
@@ -187,26 +252,29 @@ def _caps(vertices, faces, face_seg):
     return edge_seg[cut], centres, vertices[a[cut]], vertices[b[cut]]
 
 
-def segment_joint(name: str, heads: np.ndarray, bone_names: list[str], vertices: np.ndarray) -> np.ndarray:
+def segment_joint(name: str, heads: np.ndarray, bone_names: list[str], vertices: np.ndarray,
+                  profile: SkeletonProfile = ANNY) -> np.ndarray:
     """Position of a segment end: a bone head, the hip centre, or the top of the head."""
     if name == "hip_centre":
-        return 0.5 * (heads[bone_names.index("upperleg01.L")] + heads[bone_names.index("upperleg01.R")])
+        left, right = profile.hip_joints
+        return 0.5 * (heads[bone_names.index(left)] + heads[bone_names.index(right)])
     if name == "top_of_head":
-        head = heads[bone_names.index("head")]
+        head = heads[bone_names.index(profile.head_joint)]
         return np.array([head[0], vertices[:, 1].max(), head[2]])
     return heads[bone_names.index(name)]
 
 
-def build_segments(weight_kg: float, heads, bone_names, vertices, faces, face_seg, density: float) -> list[Segment]:
+def build_segments(weight_kg: float, heads, bone_names, vertices, faces, face_seg, density: float,
+                   profile: SkeletonProfile = ANNY) -> list[Segment]:
     """The segment table of one body (project frame)."""
     labels = segment_labels()
     volumes, centroids = split_volumes(vertices, faces, face_seg, len(labels))
     rows = []
     for i, label in enumerate(labels):
         name, _, side = label.partition(".")
-        prox_name, dist_name = (j.format(s=side) for j in JOINTS[name])
-        proximal = segment_joint(prox_name, heads, bone_names, vertices)
-        distal = segment_joint(dist_name, heads, bone_names, vertices)
+        prox_name, dist_name = (j.format(s=profile.side_name(side) if side else "") for j in profile.joints[name])
+        proximal = segment_joint(prox_name, heads, bone_names, vertices, profile)
+        distal = segment_joint(dist_name, heads, bone_names, vertices, profile)
         axis = distal - proximal
         length = float(np.linalg.norm(axis))
         x_w, x_l = TABLE1[name]

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from stimuli.errors import StimuliError
 
-BACKENDS = ("anny",)
 
 
 def register(subparsers) -> None:
@@ -26,7 +25,8 @@ def register(subparsers) -> None:
     p.add_argument("--hip", type=float, help="optional hip girth in metres")
     p.add_argument("--chest", type=float, help="optional chest girth in metres")
     p.add_argument("--json", type=Path, help="single body: also write anthropometry, segments and fit as JSON")
-    p.add_argument("--backend", default="anny", help="body model backend (default: anny)")
+    p.add_argument("--backend", default="anny", help="body model backend: anny (default) or smplx")
+    p.add_argument("--smplx-dir", type=Path, help="smplx backend: folder with SMPLX_FEMALE.npz and SMPLX_MALE.npz")
     p.add_argument("--allow-nearest", action="store_true",
                    help="write the nearest reachable body where a target is out of reach (default: exit 2)")
     p.add_argument("--no-sheet", action="store_true", help="protocol: skip the contact-sheet PNG")
@@ -34,8 +34,13 @@ def register(subparsers) -> None:
 
 
 def run_bodies(args: argparse.Namespace) -> int:
+    from stimuli.bodies.api import BACKENDS
+
     if args.backend not in BACKENDS:
         raise StimuliError(f"--backend {args.backend!r} is not available; known backends: {', '.join(BACKENDS)}")
+    if args.backend != "anny" and args.protocol is not None:
+        raise StimuliError(f"--backend {args.backend}: protocol bodies use Anny; the smplx backend builds one body "
+                           "at a time (--sex/--height/--bmi)")
     single = [args.sex, args.height, args.bmi]
     if args.protocol is not None:
         if any(v is not None for v in single):
@@ -69,7 +74,8 @@ def _run_single(args) -> int:
     if args.out.suffix.lower() not in (".ply", ".obj", ".glb", ".stl"):
         raise StimuliError(f"--out {args.out}: a single body is written as a mesh file (.ply, .obj, .glb or .stl)")
     body = fit_body(args.sex, args.height, args.bmi, waist_m=args.waist, hip_m=args.hip, chest_m=args.chest,
-                    on_unreachable="nearest" if args.allow_nearest else "raise")
+                    on_unreachable="nearest" if args.allow_nearest else "raise", backend_name=args.backend,
+                    smplx_dir=args.smplx_dir)
     if args.out.suffix.lower() == ".ply":
         body.save_ply(args.out)
     else:
