@@ -56,6 +56,7 @@ class DesignInfo:
     manifest: pd.DataFrame | None = None
     alpha: float = 0.05
     position_labels: list[str] = field(default_factory=list)
+    posthoc: str = "tukey"
     _rows: dict | None = field(default=None, repr=False)
 
     # -- factor look-ups ------------------------------------------------------------------------
@@ -164,7 +165,8 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
                       seed=int(meta.get("seed") if meta.get("seed") is not None else protocol.get("seed", 0)),
                       conditions=conditions, trials=trials, manifest=manifest,
                       alpha=float((meta.get("analysis") or analysis).get("alpha", 0.05)),
-                      position_labels=[str(x) for x in response.get("position_labels") or []])
+                      position_labels=[str(x) for x in response.get("position_labels") or []],
+                      posthoc=str((meta.get("analysis") or analysis).get("posthoc", "tukey")))
 
 
 def _factor(raw: dict, where: Path) -> FactorInfo:

@@ -96,10 +96,12 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     table = anova(ai.data, ai.dv, "participant", ai.within, ai.between, alpha=design.alpha)
     table = _testable(table, design)
     abbreviations = {f.name: f.abbreviations for f in design.factors if f.abbreviations}
-    tukey_all(table, abbreviations=abbreviations, alpha=design.alpha)
+    if design.posthoc == "tukey":
+        tukey_all(table, abbreviations=abbreviations, alpha=design.alpha)
     for fmt in TABLE_FORMATS:
         (out / f"anova.{fmt}").write_text(render(table, fmt), encoding="utf-8")
     (out / "anova_all.md").write_text(render(table, "md", all_rows=True), encoding="utf-8")
+    (out / "anova_gg.md").write_text(render(table, "md", correction="gg"), encoding="utf-8")
     figs = []
     if any(f.maps_to == "body" for f in design.factors) and any(f.maps_to == "motion" for f in design.factors) \
             and design.response_type == "likert":
@@ -119,9 +121,12 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
                "posthoc": {e: table.posthoc[e].summary for e in table.posthoc}}
     (out / "anova_summary.json").write_text(json.dumps(results, indent=2, ensure_ascii=False) + "\n")
     kind = "Mixed" if ai.between else "Repeated-measures"
-    return {"title": f"{kind} ANOVA of {ai.dv} (the paper's analysis)", "html": render(table, "html"),
+    corrected = ("<details><summary>Sphericity: the same table with Greenhouse–Geisser corrected degrees of "
+                 "freedom and p (Mauchly's W, ε and Huynh–Feldt in anova.json)</summary>"
+                 f"{render(table, 'html', correction='gg')}</details>\n")
+    return {"title": f"{kind} ANOVA of {ai.dv} (the paper's analysis)", "html": render(table, "html") + corrected,
             "note": _anova_note(design), "figures": figs, "results": results,
-            "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova_all.md", "cell_values.csv"]}
+            "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova_all.md", "anova_gg.md", "cell_values.csv"]}
 
 
 def _testable(table, design: DesignInfo):
@@ -132,13 +137,14 @@ def _testable(table, design: DesignInfo):
 
 
 def _anova_note(design: DesignInfo) -> str:
+    common = (" Tukey HSD over all pairs of the cell means of each significant effect (its own error term). "
+              "Uncorrected p as in the paper. Observed power is a function of p and adds nothing to it; it is "
+              "shown only because the paper reports it.")
     if design.response_type == "likert":
-        return ("Ratings averaged over repetitions per participant and cell; Tukey HSD over all pairs of the "
-                "cell means of each significant effect (its own error term). Observed power is a function of "
-                "p and says nothing beyond it.")
+        return "Ratings averaged over repetitions per participant and cell." + common
     return (f"Percentage of trials each {design.alternatives.name} level was chosen per participant and cell. "
             f"The levels' percentages sum to 100 in every cell, so only effects that involve "
-            f"{design.alternatives.name} are testable and shown.")
+            f"{design.alternatives.name} are testable and shown." + common)
 
 
 def _votes_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:

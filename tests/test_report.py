@@ -141,12 +141,13 @@ def test_report_opens_in_chromium(reports, tmp_path):
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 900})
             page.goto((folder / "report" / "report.html").as_uri())
-            tables = page.locator("table.anova").count()
+            tables = page.locator("table.anova").count()      # the paper's table + the GG-corrected one
+            visible = page.locator("table.anova").first.inner_text() if page.locator("table.anova").first.is_visible() else ""
             images = page.evaluate("Array.from(document.images).map(i => i.complete && i.naturalWidth)")
             heading = page.locator("h1").inner_text()
             page.screenshot(path=str(shot), full_page=True)
         finally:
             browser.close()
-    assert tables == 1 and heading.startswith("Analysis report: exp1_shape_motion")
+    assert tables == 2 and "BODY*SEX" in visible and heading.startswith("Analysis report: exp1_shape_motion")
     assert len(images) >= 2 and all(w and w > 300 for w in images)
     assert shot.stat().st_size > 50_000
