@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.slow
+EXP1 = Path(__file__).resolve().parents[1] / "protocols" / "exp1_shape_motion.yaml"
 
 DESIGN_COLUMNS = ["body_id", "sex", "target_height_m", "target_bmi", "height_m", "mass_kg", "bmi", "waist_m",
                   "n_vertices", "n_faces", "mesh"]
@@ -19,7 +21,7 @@ def protocol_run(tmp_path_factory):
     from stimuli.cli import main
 
     root = tmp_path_factory.mktemp("bodies")
-    codes = [main(["bodies", "protocols/exp1_shape_motion.yaml", "--out", str(root / name)]) for name in ("a", "b")]
+    codes = [main(["bodies", str(EXP1), "--out", str(root / name)]) for name in ("a", "b")]
     return codes, root
 
 
@@ -90,10 +92,10 @@ def test_single_body(tmp_path, run_cli):
     (["--sex", "F", "--height", "1.6", "--bmi", "28", "--out", "x.ply", "--backend", "smpl-y"], "backend"),
     (["--sex", "Q", "--height", "1.6", "--bmi", "28", "--out", "x.ply"], "sex must be"),
     (["--sex", "F", "--height", "1.6", "--bmi", "28", "--out", "x.txt"], "mesh file"),
-    (["protocols/exp1_shape_motion.yaml", "--sex", "F", "--out", "d"], "not both"),
+    ([str(EXP1), "--sex", "F", "--out", "d"], "not both"),
     (["no_such_protocol.yaml", "--out", "d"], "no_such_protocol"),
 ])
 def test_user_errors_exit_2(tmp_path, monkeypatch, run_cli, args, message):
-    monkeypatch.chdir(tmp_path) if "protocols/" not in " ".join(args) else None
+    monkeypatch.chdir(tmp_path)
     code, _, err = run_cli("bodies", *args)
     assert code == 2 and message in err.replace("\n", " ")
