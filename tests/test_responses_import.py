@@ -167,3 +167,25 @@ def test_cli_inspect_and_bad_file_exit_code(run_cli):
     assert code == 0 and '"responses": 11' in out
     code, _, err = run_cli("responses", "inspect", str(DATA / "bad_binary.xlsx"))
     assert code == 2 and "not a text file" in err and "Traceback" not in err
+
+
+def test_export_tag_column_of_the_manifest_maps_other_tags(tmp_path):
+    """A manifest/conditions `export_tag` column lets surveys use their own question names (Q1, Q2 …)."""
+    import shutil
+    folder = tmp_path / "design"
+    shutil.copytree(DATA / "mini_afc", folder)
+    conditions = pd.read_csv(folder / "conditions.csv", dtype=str, keep_default_na=False)
+    manifest = conditions[["stimulus_id"]].assign(export_tag=[f"Q{i + 1}" for i in range(len(conditions))])
+    manifest.to_csv(folder / "manifest.csv", index=False)
+    text = (DATA / "qualtrics_afc_text.csv").read_text()
+    header, rest = text.split("\n", 1)
+    for i, sid in enumerate(conditions["stimulus_id"]):
+        header = header.replace(f",{sid},", f",Q{i + 1},")
+    (tmp_path / "q.csv").write_text(header + "\n" + rest)
+    design = load_design(folder)
+    renamed = import_responses(tmp_path / "q.csv", design)
+    original = import_responses(DATA / "qualtrics_afc_text.csv", design)
+    assert renamed.reconciles and len(renamed.data) == 16
+    key = ["participant", "stimulus_id"]
+    assert renamed.data.sort_values(key)[key + ["chosen"]].values.tolist() == \
+        original.data.sort_values(key)[key + ["chosen"]].values.tolist()
