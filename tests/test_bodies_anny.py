@@ -113,6 +113,9 @@ def test_bad_inputs_are_user_errors(kwargs, match):
 
 
 def test_cache_returns_the_same_body(tmp_path, monkeypatch):
+    from stimuli.bodies import backend
+
+    monkeypatch.setenv("ANNY_CACHE_DIR", str(backend.anny_cache_dir()))  # keep Anny's model cache where it is
     monkeypatch.setenv("SHAPEMOTION_CACHE", str(tmp_path))
     first = fit_body("M", 1.77, 27.0)
     again = fit_body("M", 1.77, 27.0)
