@@ -138,10 +138,10 @@ def render_frames(look: Look, figures: list[Figure]):
             t.set_time(i / look.fps)
         if background is None:  # everything outside the region is the same in every frame
             background = stage.render()
-            frame = background
-        else:
-            frame = background.copy()
-            frame[y0:y1, x0:x1] = stage.render(region)
+        # Every frame, the first included, takes its region from a region render: a full render
+        # can differ from it in a few edge pixels, which would flicker once per loop.
+        frame = background.copy()
+        frame[y0:y1, x0:x1] = stage.render(region)
         yield overlay.apply(frame) if overlay else frame
 
 

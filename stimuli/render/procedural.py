@@ -35,7 +35,7 @@ def stepping_pose(body, n_frames: int, cycles: int = 2, amplitude: float = 1.0) 
         rotations[:, rig.index(bone)] = xyzw[:, [3, 0, 1, 2]]
     root = np.repeat(rig.rest_heads[:1], n_frames, axis=0)
     # Bent knees shorten the legs; lower the pelvis so the feet stay near the ground.
-    root[:, 1] += -0.04 + 0.015 * np.cos(4 * np.pi * phase)
+    root[:, 1] += -0.04 + 0.015 * amplitude * np.cos(4 * np.pi * phase)
     return rotations, root
 
 

@@ -1,0 +1,144 @@
+"""The render pipeline on the bundled protocols (shortened to 1 s clips, 160×90 … 320×180):
+manifest columns and hashes, resuming, side-by-side placement, errors, the CLI."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+DESIGN_COLUMNS = ["stimulus_id", "file", "sha256", "width", "height", "fps", "n_frames", "duration_s", "layout"]
+
+
+@pytest.fixture
+def short_protocol(tmp_path, protocol_path):
+    """A bundled protocol with 1-second clips (same design), written to tmp_path."""
+
+    def make(name, duration=1.0):
+        data = yaml.safe_load(protocol_path(name).read_text())
+        data["clip"]["duration_s"] = duration
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(data))
+        return path
+
+    return make
+
+
+def _manifest(out):
+    with open(out / "manifest.csv", newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def _render(path, out, **kwargs):
+    from stimuli.render.pipeline import render_protocol
+
+    options = dict(resolution="160x90", fps=10, workers=1, progress=False, source="procedural") | kwargs
+    return render_protocol(path, out, **options)
+
+
+def test_manifest_has_design_columns_and_verifiable_hashes(short_protocol, tmp_path):
+    from stimuli.render.manifest import verify_manifest
+    from stimuli.render.video import read_video
+
+    out = tmp_path / "exp1"
+    report = _render(short_protocol("exp1_shape_motion"), out, limit=2)
+    rows = _manifest(out)
+    assert [r["stimulus_id"] for r in rows] == report.rendered == ["F-walk-Hi1-Hi1", "F-walk-Hi1-Hi2"]
+    header = list(rows[0])
+    assert header[:9] == DESIGN_COLUMNS
+    assert header[9:13] == ["SEX", "GAIT", "BODY", "MOTION"] and "practice" in header
+    for row in rows:
+        frames, meta = read_video(out / row["file"])
+        assert frames.shape == (10, 90, 160, 3) and int(row["n_frames"]) == 10 and meta["fps"] == 10
+        assert (out / row["poster"]).exists()
+    assert verify_manifest(out) == []
+    assert (out / "contact_sheet.png").exists()
+    with open(out / rows[0]["file"], "r+b") as handle:   # corrupt one clip
+        handle.seek(-10, os.SEEK_END)
+        handle.write(b"0123456789")
+    assert len(verify_manifest(out)) == 1
+
+
+def test_second_run_renders_only_what_is_new_or_changed(short_protocol, tmp_path):
+    out = tmp_path / "exp1"
+    path = short_protocol("exp1_shape_motion")
+    first = _render(path, out, limit=2)
+    stamp = {p.name: p.stat().st_mtime_ns for p in (out / "clips").iterdir()}
+    second = _render(path, out, limit=3)
+    assert second.skipped == first.rendered and second.rendered == ["F-walk-Hi1-Lo1"]
+    assert all((out / "clips" / n).stat().st_mtime_ns == t for n, t in stamp.items())
+    third = _render(path, out, limit=3, resolution="192x108")   # other settings: all again
+    assert len(third.rendered) == 3 and len(_manifest(out)) == 3
+    assert _manifest(out)[0]["width"] == "192"
+
+
+def test_side_by_side_left_and_right_match_the_manifest(short_protocol, tmp_path):
+    out = tmp_path / "exp2"
+    report = _render(short_protocol("exp2_com_vs_average"), out, only="walk-F-Hi1-", resolution="320x180")
+    rows = {r["stimulus_id"]: r for r in _manifest(out)}
+    assert sorted(rows) == ["walk-F-Hi1-COM_NoCOM", "walk-F-Hi1-NoCOM_COM"] == sorted(report.rendered)
+    from stimuli.render.video import read_video
+
+    for row in rows.values():
+        frames, _ = read_video(out / row["file"])
+        frames = frames.astype(int)
+        halves = {"left": frames[:, :, :160], "right": frames[:, :, 160:]}
+        body = {k: (np.abs(h[0] - 158).max(axis=-1) < 40).sum() for k, h in halves.items()}
+        assert min(body.values()) > 300, "a body in each half"
+        motion = {k: np.abs(np.diff(h, axis=0)).mean() for k, h in halves.items()}
+        # procedural poses: the first METHOD level (NoCOM) steps, the second one half as much
+        busier = max(motion, key=motion.get)
+        assert row[busier] == "NoCOM" and row["left"] != row["right"]
+
+
+def test_missing_motion_sources_are_named_not_faked(short_protocol, tmp_path, run_cli):
+    code, out, err = run_cli("render", short_protocol("exp2_com_vs_average"), "--out", tmp_path / "x",
+                             "--limit", "1", "--resolution", "160x90", "--no-progress")
+    assert code == 2
+    assert "could not be rendered" in err and "average motion" in err
+    assert not list((tmp_path / "x").glob("clips/*.mp4"))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--resolution", "641x360"], "--resolution"),
+    (["--only", "no-such-stimulus"], "--only"),
+    (["--limit", "-1"], "--limit"),
+])
+def test_bad_options_exit_2(args, message, short_protocol, tmp_path, run_cli):
+    code, _, err = run_cli("render", short_protocol("exp1_shape_motion"), "--out", tmp_path / "y", *args)
+    assert code == 2 and message in err
+
+
+@pytest.mark.slow
+def test_ctrl_c_leaves_no_half_files_and_the_rerun_resumes(short_protocol, tmp_path):
+    path = short_protocol("exp1_shape_motion", duration=2.0)
+    out = tmp_path / "exp1"
+    command = [sys.executable, "-m", "stimuli.cli", "render", str(path), "--out", str(out), "--limit", "6",
+               "--resolution", "320x180", "--fps", "15", "--workers", "1", "--poses", "procedural", "--no-progress"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.time() + 240
+    while time.time() < deadline and process.poll() is None:
+        if (out / "manifest.csv").exists() and len(_manifest(out)) >= 2:
+            break
+        time.sleep(0.2)
+    time.sleep(0.5)    # let it get into the middle of the next clip
+    process.send_signal(signal.SIGINT)
+    process.wait(timeout=60)
+    assert process.returncode == 130
+    finished = [r["stimulus_id"] for r in _manifest(out)]
+    assert 2 <= len(finished) < 6
+    leftovers = [p.name for p in out.rglob("*") if ".tmp" in p.name]
+    assert leftovers == []
+    assert sorted(p.stem for p in (out / "clips").glob("*.mp4")) == sorted(finished)
+    from stimuli.render.pipeline import render_protocol
+
+    report = render_protocol(path, out, limit=6, resolution="320x180", fps=15, workers=1, progress=False,
+                             source="procedural")
+    assert report.skipped == finished and len(report.rendered) == 6 - len(finished)
