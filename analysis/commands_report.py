@@ -34,6 +34,7 @@ def _register_responses(subparsers) -> None:
     q = sub.add_parser("inspect", help="format detected, number of responses, columns with their question text")
     q.add_argument("file", help="response export (CSV or JSON)")
     q.add_argument("--json", action="store_true", help="print JSON instead of text")
+    q.add_argument("--design", metavar="DIR", help="also import against this design directory: counts, exclusions")
     q.set_defaults(func=run_inspect)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -41,6 +42,10 @@ def _register_responses(subparsers) -> None:
 def run_inspect(args) -> int:
     from analysis.responses.inspect import describe_text, inspect_file
     info = inspect_file(args.file)
+    if args.design:
+        from analysis.io_design import load_design
+        from analysis.responses import import_responses
+        info["import"] = import_responses(args.file, load_design(args.design)).summary()
     print(json.dumps(info, indent=2, ensure_ascii=False) if args.json else describe_text(info))
     return 0
 

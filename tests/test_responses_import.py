@@ -165,6 +165,9 @@ def test_cli_inspect_and_bad_file_exit_code(run_cli):
     assert code == 0 and "format: qualtrics-legacy" in out and "responses: 2" in out
     code, out, _ = run_cli("responses", "inspect", str(DATA / "jspsych_likert.csv"), "--json")
     assert code == 0 and '"responses": 11' in out
+    code, out, _ = run_cli("responses", "inspect", str(DATA / "qualtrics_corrupt.csv"), "--design",
+                           str(DATA / "mini_likert"))
+    assert code == 0 and "2 rows imported, 6 excluded" in out and "columns not imported: Q99" in out
     code, _, err = run_cli("responses", "inspect", str(DATA / "bad_binary.xlsx"))
     assert code == 2 and "not a text file" in err and "Traceback" not in err
 

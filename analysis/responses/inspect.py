@@ -24,7 +24,9 @@ def inspect_file(path: str | Path) -> dict:
         cols = classify_columns(raw, tags=None)
         kinds = {i: "metadata" for i in cols.metadata} | {i: "display order" for i in cols.display_order}
         kinds |= {i: "timing" for i in cols.timing} | {i: "question" for i in cols.unknown}
-        kinds |= {i: "embedded data or question" for i in cols.embedded}
+        # the current export marks questions by QID ImportIds; the legacy one cannot tell them apart
+        embedded = "embedded data" if raw.format == "qualtrics" else "embedded data or question"
+        kinds |= {i: embedded for i in cols.embedded}
         finished = raw.columns.index("Finished") if "Finished" in raw.columns else None
         unfinished = sum(1 for r in raw.rows if finished is not None and finished < len(r)
                          and r[finished].strip().lower() in UNFINISHED)
@@ -52,4 +54,11 @@ def describe_text(info: dict) -> str:
     for c in info["columns"]:
         text = f" — {c['question_text'][:70]}" if c["question_text"] and c["question_text"] != c["name"] else ""
         lines.append(f"  {c['name']} [{c['kind']}]{text}")
+    if "import" in info:
+        imp = info["import"]
+        reasons = ", ".join(f"{k}: {v}" for k, v in imp["excluded_by_reason"].items()) or "none"
+        lines += [f"import against the design: {imp['imported_rows']} rows imported, {imp['excluded_rows']} excluded "
+                  f"({reasons}); {imp['participants']} participants, {imp['answers']} test answers"]
+        if imp["columns_not_imported"]:
+            lines.append(f"columns not imported: {', '.join(imp['columns_not_imported'])}")
     return "\n".join(lines)
