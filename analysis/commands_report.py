@@ -97,6 +97,8 @@ def _register_power(subparsers) -> None:
     p.add_argument("--model", metavar="M.yaml", help="generative model (default: the bundled model of the protocol)")
     p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     p.add_argument("--alpha", type=float, help="significance level (default: the protocol's)")
+    p.add_argument("--correction", choices=["none", "gg", "hf"], default="none",
+                   help="sphericity correction of the ANOVA p-values (default none, as the paper)")
     p.add_argument("--effect", help="effect to size the study for, e.g. BODY:MOTION")
     p.add_argument("--target", type=float, default=0.8, help="power wanted for --effect (default 0.8)")
     p.add_argument("--csv", metavar="FILE", help="also write the table as CSV")
@@ -114,7 +116,7 @@ def run_power(args) -> int:
     if args.alpha is not None and not 0 < args.alpha < 1:
         raise AnalysisError(f"--alpha: expected a number between 0 and 1, got {args.alpha}")
     table = power_sweep(design, model, args.participants, args.sims, args.seed, args.alpha,
-                        progress=sys.stderr.isatty())
+                        progress=sys.stderr.isatty(), correction=args.correction)
     answer = None
     if args.effect:
         answer = required_participants(table, args.effect, args.target)

@@ -78,8 +78,13 @@ def informative_effects(design: DesignInfo, effects: list[str]) -> list[str]:
 
 
 def power_analysis(design: DesignInfo, model: GenerativeModel, participants: int, sims: int, seed: int,
-                   alpha: float | None = None, progress: bool = False) -> PowerResult:
-    """Rejection rates of the design's planned tests over ``sims`` simulated data sets of N participants."""
+                   alpha: float | None = None, progress: bool = False, correction: str = "none") -> PowerResult:
+    """Rejection rates of the design's planned tests over ``sims`` simulated data sets of N participants.
+
+    ``correction`` ("none" as the paper, "gg" or "hf") applies a sphericity correction to the ANOVA p-values.
+    """
+    if correction not in ("none", "gg", "hf"):
+        raise AnalysisError(f"--correction: expected none, gg or hf, got {correction!r}")
     if sims < 1:
         raise AnalysisError(f"--sims: expected a positive number of simulated data sets, got {sims}")
     alpha = design.alpha if alpha is None else alpha
@@ -89,7 +94,7 @@ def power_analysis(design: DesignInfo, model: GenerativeModel, participants: int
     if design.dependent_measure in ("votes", "rank_points"):
         names, rejections = _nonparametric(design, model, plan, rng, sims, alpha, progress)
     else:
-        names, rejections = _anova_rejections(design, model, plan, rng, sims, alpha, progress)
+        names, rejections = _anova_rejections(design, model, plan, rng, sims, alpha, progress, correction)
     seconds = time.perf_counter() - start
     rows = []
     for name, k in zip(names, rejections):
@@ -111,13 +116,17 @@ def _chunks(sims: int, progress: bool, label: str):
     bar.close()
 
 
-def _anova_rejections(design, model, plan, rng, sims, alpha, progress):
+def _anova_rejections(design, model, plan, rng, sims, alpha, progress, correction):
     compiled = anova_design(design, plan).compile()
     names, counts = None, None
     for size in _chunks(sims, progress, f"N={len(plan.groups)}"):
         Y = measure_arrays(design, plan.test, draw(design, model, plan, rng, sims=size))
-        result = anova_many(Y, compiled, alpha=alpha, sphericity=False)
-        hits = (np.nan_to_num(result.p, nan=1.0) < alpha).sum(axis=0)
+        result = anova_many(Y, compiled, alpha=alpha, sphericity=correction != "none")
+        p = result.p
+        if correction != "none":  # effects with 1 df have no correction (NaN): keep their p
+            corrected = result.arrays[f"p_{correction}"]
+            p = np.where(np.isnan(corrected), p, corrected)
+        hits = (np.nan_to_num(p, nan=1.0) < alpha).sum(axis=0)
         names = result.effects
         counts = hits if counts is None else counts + hits
     keep = informative_effects(design, names)
@@ -147,11 +156,11 @@ def _trials_per_participant(plan: TrialPlan) -> int:
 
 
 def power_sweep(design: DesignInfo, model: GenerativeModel, participants: list[int], sims: int, seed: int,
-                alpha: float | None = None, progress: bool = False) -> pd.DataFrame:
+                alpha: float | None = None, progress: bool = False, correction: str = "none") -> pd.DataFrame:
     """:func:`power_analysis` for each N; one row per N × effect, plus data sets per second."""
     frames = []
     for n in participants:
-        result = power_analysis(design, model, n, sims, seed, alpha, progress)
+        result = power_analysis(design, model, n, sims, seed, alpha, progress, correction)
         frames.append(result.table.assign(participants=n, datasets_per_second=result.datasets_per_second))
     table = pd.concat(frames, ignore_index=True)
     return table[["participants", "effect", "rejections", "sims", "power", "ci_low", "ci_high", "datasets_per_second"]]

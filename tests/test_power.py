@@ -102,3 +102,14 @@ def test_cli_power_table_json_and_errors(designs, run_cli, tmp_path):
     assert code == 2 and "--sims" in err
     code, _, err = run_cli("power", str(tmp_path / "missing"), "--participants", "8", "--sims", "10")
     assert code == 2 and "not found" in err and "missing" in err
+
+
+def test_sphericity_correction_is_conservative_under_the_null(designs):
+    design = designs["exp1_shape_motion"]
+    plain = power_analysis(design, null_model(design), 16, 1000, seed=3).table.set_index("effect")
+    gg = power_analysis(design, null_model(design), 16, 1000, seed=3, correction="gg").table.set_index("effect")
+    assert (gg["power"] <= plain["power"]).all()                    # same data sets, larger p
+    assert gg.loc["GAIT", "power"] == plain.loc["GAIT", "power"]      # 1 df: nothing to correct
+    assert gg["power"].between(0.01, 0.07).all()
+    with pytest.raises(AnalysisError, match="correction"):
+        power_analysis(design, null_model(design), 16, 10, seed=3, correction="xx")
