@@ -156,12 +156,26 @@ def within_tolerance(targets: Targets, measured: dict[str, float]) -> bool:
 
 @functools.lru_cache(maxsize=8)
 def _start_grid(sex: str, age_years: float):
-    """Heights and BMIs on a coarse (height, build) grid, once per sex and age per process."""
+    """Heights and BMIs on a coarse (height, build) grid, once per sex and age (kept on disk too)."""
     hs, ss = np.array([0.15, 0.55]), np.linspace(0.0, BUILD_MAX, 9)
+    path = (backend.project_cache_root() / "bodies"
+            / f"start_grid_{backend.anny_version()}_{FITTER_VERSION}_{sex}_{age_years:g}.npz")
+    try:
+        with np.load(path) as data:
+            return hs, ss, data["height"], data["bmi"]
+    except (OSError, ValueError, KeyError):
+        pass  # absent or damaged: compute it
     grid = np.array([[h, s] for h in hs for s in ss])
     rows, _ = measure_batch(Targets(sex, 1.7, 22.0, age_years=age_years), grid, ("height", "build"))
     height = np.array([r["height_m"] for r in rows]).reshape(2, -1)
     bmi = np.array([r["bmi"] for r in rows]).reshape(2, -1)
+    import io
+
+    from stimuli.fileio import atomic_write_bytes
+
+    buffer = io.BytesIO()
+    np.savez(buffer, height=height, bmi=bmi)
+    atomic_write_bytes(path, buffer.getvalue())
     return hs, ss, height, bmi
 
 
