@@ -192,3 +192,23 @@ def test_export_tag_column_of_the_manifest_maps_other_tags(tmp_path):
     key = ["participant", "stimulus_id"]
     assert renamed.data.sort_values(key)[key + ["chosen"]].values.tolist() == \
         original.data.sort_values(key)[key + ["chosen"]].values.tolist()
+
+
+def test_a_folder_of_per_participant_files(likert, tmp_path):
+    """The self-hosted survey saves one CSV per participant; a folder of them imports as one data set."""
+    lines = (DATA / "jspsych_likert.csv").read_text().splitlines(keepends=True)
+    header, p01, p09 = lines[0], lines[1:12], lines[12:]
+    (tmp_path / "shapemotion_mini_likert_p01.csv").write_text(header + "".join(p01))
+    (tmp_path / "shapemotion_mini_likert_p09.csv").write_text(header + "".join(p09))
+    (tmp_path / "shapemotion_mini_likert_p01_again.csv").write_text(header + "".join(p01))
+    (tmp_path / "notes.txt").write_text("not a response file")
+    result = import_responses(tmp_path, likert)
+    assert result.format == "jspsych-csv" and result.n_rows == 11 + 3 + 11
+    assert result.reconciles and result.n_imported_rows == 9
+    assert set(result.data["file"]) == {"shapemotion_mini_likert_p01.csv"}
+    dup = result.exclusions[result.exclusions["reason"] == "duplicate participant id"]
+    assert len(dup) == 9 and set(dup["file"]) == {"shapemotion_mini_likert_p01_again.csv"}
+    assert cell_means(result, likert) == expected_means(p01=P01)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(AnalysisError, match="no .csv or .json"):
+        import_responses(tmp_path / "empty", likert)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import TagIndex
 from analysis.responses.qualtrics import qualtrics_answers
@@ -41,11 +42,11 @@ class ImportResult:
 
     @property
     def n_imported_rows(self) -> int:
-        return int(self.data["row"].nunique())
+        return len(_row_keys(self.data))
 
     @property
     def n_excluded_rows(self) -> int:
-        return int(self.exclusions["row"].dropna().nunique())
+        return len(_row_keys(self.exclusions.dropna(subset=["row"])))
 
     @property
     def reconciles(self) -> bool:
@@ -62,8 +63,17 @@ class ImportResult:
                 "columns_not_imported": self.exclusions.loc[self.exclusions["row"].isna(), "column"].tolist()}
 
 
+def _row_keys(frame: pd.DataFrame) -> set:
+    """Distinct file rows of a table: ``row``, or (``file``, ``row``) for a folder of files."""
+    columns = ["file", "row"] if "file" in frame else ["row"]
+    return set(frame[columns].itertuples(index=False, name=None))
+
+
 def import_responses(path: str | Path, design: DesignInfo) -> ImportResult:
-    """Read ``path`` (any supported format), map answers to the design's stimuli, apply the exclusions."""
+    """Read ``path`` (any supported format, or a folder of such files, e.g. one jsPsych CSV per participant),
+    map answers to the design's stimuli, apply the exclusions."""
+    if Path(path).is_dir():
+        return import_folder(Path(path), design)
     raw = read_response_file(path)
     tags = _tag_index(design)
     if raw.format.startswith("qualtrics"):
@@ -81,3 +91,28 @@ def _tag_index(design: DesignInfo) -> TagIndex:
         if table is not None and "export_tag" in table:
             extra.update(dict(zip(table["export_tag"].astype(str), table["stimulus_id"].astype(str))))
     return TagIndex(design.conditions["stimulus_id"], extra)
+
+
+def import_folder(folder: Path, design: DesignInfo) -> ImportResult:
+    """Import every ``*.csv``/``*.json`` file of a folder; tables gain a ``file`` column.
+
+    A participant found in several files is kept from the first file (in name order); the later files'
+    rows of that participant are excluded as duplicates.
+    """
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in (".csv", ".json"))
+    if not files:
+        raise AnalysisError(f"{folder}: the folder holds no .csv or .json response file")
+    results = [import_responses(f, design) for f in files]
+    data = pd.concat([r.data.assign(file=r.path.name) for r in results], ignore_index=True)
+    exclusions = pd.concat([r.exclusions.assign(file=r.path.name) for r in results], ignore_index=True)
+    owner = data.drop_duplicates("participant")[["participant", "file"]].set_index("participant")["file"]
+    later = data["file"] != data["participant"].map(owner)
+    moved = data[later].drop_duplicates(["file", "row"])
+    extra = pd.DataFrame({"row": moved["row"], "participant": moved["participant"],
+                          "reason": "duplicate participant id",
+                          "detail": [f"{p!r} already imported from {owner[p]}" for p in moved["participant"]],
+                          "column": "", "file": moved["file"]})
+    exclusions = pd.concat([exclusions, extra], ignore_index=True).astype({"row": "Int64"})
+    formats = "+".join(sorted({r.format for r in results}))
+    return ImportResult(folder, formats, data[~later].reset_index(drop=True), exclusions,
+                        sum(r.n_rows for r in results))
