@@ -151,3 +151,19 @@ def test_report_opens_in_chromium(reports, tmp_path):
     assert tables == 2 and "BODY*SEX" in visible and heading.startswith("Analysis report: exp1_shape_motion")
     assert len(images) >= 2 and all(w and w > 300 for w in images)
     assert shot.stat().st_size > 50_000
+
+
+def test_analyze_a_folder_of_jspsych_files(reports, tmp_path):
+    folder, _ = reports["exp2_com_vs_average"]
+    design = load_design(folder / "design")
+    sim = simulate_responses(design, load_model(None, design), 8, seed=4)
+    files = tmp_path / "responses"
+    files.mkdir()
+    for participant, rows in sim.groupby("participant"):
+        (files / f"shapemotion_exp2_{participant}.csv").write_text(export_text(rows, design, "jspsych"))
+    (files / "shapemotion_exp2_1_copy.csv").write_text(export_text(sim[sim["participant"] == 1], design, "jspsych"))
+    summary = analyze(folder / "design", files, tmp_path / "report")
+    assert summary["import"]["participants"] == 8
+    assert summary["import"]["excluded_by_reason"]["duplicate participant id"] == 80
+    html = (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
+    assert "<th>file</th>" in html and "shapemotion_exp2_1_copy.csv" in html
