@@ -1,0 +1,280 @@
+"""Foot-contact clean-up: sole points, two-bone leg IK, planted feet that neither sink, float nor slide.
+
+Each foot is reduced to three sole points rigidly attached to it (heel, ball, toe tip), found from
+the rest pose. While a foot is in contact, its lowest sole point is pinned to the ground (y = 0) at
+a horizontal anchor that moves backwards with the treadmill belt (zero overground); when the
+lowest point changes (heel → ball during roll-over) the new point is anchored where it is, so the
+foot rolls instead of sliding. The ankle target that results is reached with analytic two-bone IK
+on hip and knee (Holden's formulation), keeping the foot's orientation; targets blend in and out
+over a few frames around each contact. Outside contact, a foot that would go below the ground is
+lifted. If a target is out of reach the pelvis is lowered just enough (smoothly, over the loop).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
+from stimuli.motion import quat
+from stimuli.motion.motion import Motion
+from stimuli.motion.skeleton import role_indices
+
+SIDES = ("l", "r")
+PIVOT_SWITCH_M = 0.002
+
+
+def sole_points(motion: Motion, floor_y: float | None = None) -> dict[str, list[tuple[int, np.ndarray]]]:
+    """Per foot: [(joint index, offset in that joint's rest-aligned frame)] for heel, ball, toe tip.
+
+    The floor is the lowest rest joint unless ``floor_y`` (rest-pose coordinates, root at origin)
+    is given (e.g. from a mesh's lowest vertex).
+    """
+    roles = role_indices(motion)
+    rest = motion.rest_positions()
+    y0 = rest[:, 1].min() if floor_y is None else floor_y
+    out = {}
+    for s in SIDES:
+        a = roles[f"{s}_ankle"]
+        toe = roles.get(f"{s}_toe")
+        ends = motion.children(toe) if toe is not None else []
+        tip_pos = rest[ends[0]] if ends else (rest[toe] if toe is not None else rest[a] + np.array([0, 0, 0.15]))
+        fwd = tip_pos - rest[a]
+        fwd[1] = 0.0
+        length = max(np.linalg.norm(fwd), 1e-3)
+        back = -fwd / length * 0.25 * length
+        heel = np.array([0.0, y0 - rest[a, 1], 0.0]) + back
+        pts = [(a, heel)]
+        if toe is not None:
+            ball = rest[toe] - rest[a]
+            ball[1] = y0 - rest[a, 1]
+            pts.append((a, ball))
+            tip = tip_pos - rest[toe]
+            tip[1] = y0 - rest[toe, 1]
+            pts.append((toe, tip))
+        else:
+            pts.append((a, fwd + np.array([0.0, y0 - rest[a, 1], 0.0])))
+        out[s] = pts
+    return out
+
+
+def sole_positions(grot: np.ndarray, gpos: np.ndarray, points: list[tuple[int, np.ndarray]]) -> np.ndarray:
+    """World positions (T×P×3) of one foot's sole points from global transforms."""
+    return np.stack([gpos[:, j] + quat.rotate(grot[:, j], off) for j, off in points], axis=1)
+
+
+def two_bone_ik(motion: Motion, rot: np.ndarray, root: np.ndarray, side: str, target: np.ndarray,
+                keep_foot: np.ndarray) -> np.ndarray:
+    """Rotate hip and knee so the ankle reaches ``target`` (T×3); the foot keeps world rotation ``keep_foot``."""
+    roles = role_indices(motion)
+    hip, knee, ankle = roles[f"{side}_hip"], roles[f"{side}_knee"], roles[f"{side}_ankle"]
+    grot, gpos = motion.global_transforms(rot, root)
+    a, b, c = gpos[:, hip], gpos[:, knee], gpos[:, ankle]
+    a_gr, b_gr = grot[:, hip], grot[:, knee]
+    lab = np.linalg.norm(b - a, axis=1)
+    lcb = np.linalg.norm(c - b, axis=1)
+    lat = np.clip(np.linalg.norm(target - a, axis=1), 1e-4, (lab + lcb) * 0.9999)
+
+    def unit(v):
+        return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+    def ang(u, v):
+        return np.arccos(np.clip(np.sum(unit(u) * unit(v), axis=-1), -1.0, 1.0))
+
+    ac_ab_0 = ang(c - a, b - a)
+    ba_bc_0 = ang(a - b, c - b)
+    ac_at_0 = ang(c - a, target - a)
+    ac_ab_1 = np.arccos(np.clip((lcb**2 - lab**2 - lat**2) / (-2 * lab * lat), -1, 1))
+    ba_bc_1 = np.arccos(np.clip((lat**2 - lab**2 - lcb**2) / (-2 * lab * lcb), -1, 1))
+    axis0 = np.cross(c - a, b - a)
+    # A straight leg has no bend plane: bend about the thigh's own lateral axis (knees go forward).
+    lateral = quat.rotate(a_gr, np.array([1.0, 0.0, 0.0]))
+    straight = np.linalg.norm(axis0, axis=1) < 1e-6
+    axis0[straight] = -lateral[straight]
+    axis0 = unit(axis0)
+    axis1 = np.cross(c - a, target - a)
+    axis1 = np.where(np.linalg.norm(axis1, axis=1, keepdims=True) < 1e-9, axis0, axis1)
+    axis1 = unit(axis1)
+    r0 = quat.from_axis_angle(quat.rotate(quat.inv(a_gr), axis0) * (ac_ab_1 - ac_ab_0)[:, None])
+    r1 = quat.from_axis_angle(quat.rotate(quat.inv(b_gr), axis0) * (ba_bc_1 - ba_bc_0)[:, None])
+    r2 = quat.from_axis_angle(quat.rotate(quat.inv(a_gr), axis1) * ac_at_0[:, None])
+    out = rot.copy()
+    out[:, hip] = quat.mul(rot[:, hip], quat.mul(r0, r2))
+    out[:, knee] = quat.mul(rot[:, knee], r1)
+    grot2, _ = motion.global_transforms(out, root)
+    out[:, ankle] = quat.mul(quat.inv(grot2[:, knee]), keep_foot)
+    return out
+
+
+def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) runs of True in a boolean array (not wrapping)."""
+    d = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, belt: np.ndarray,
+                    fps: float, blend: int = 4, cyclic: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Ankle targets (T×3) and blend weights (T) for one foot (see the module docstring)."""
+    t_n = len(contact)
+    shift = 0
+    if cyclic and contact.all():
+        contact = contact.copy()
+        contact[np.argmax(sole[:, :, 1].min(axis=1))] = False
+    if cyclic and contact[0]:
+        shift = int(np.argmin(contact))  # first frame out of contact becomes frame 0
+    roll = lambda x: np.roll(x, -shift, axis=0)  # noqa: E731
+    sole_r, ankle_r, c_r = roll(sole), roll(ankle), roll(contact)
+    target = ankle_r.copy()
+    weight = np.zeros(t_n)
+    step = belt / fps
+    for s, e in _intervals(c_r):
+        anchor, pivot = None, -1
+        for t in range(s, e):
+            offsets = sole_r[t] - ankle_r[t]  # sole points relative to the ankle (foot orientation kept)
+            k = int(np.argmin(sole_r[t, :, 1]))
+            # Hysteresis: a flat foot has tied points; switch pivot only for a clearly lower point.
+            if pivot >= 0 and sole_r[t, pivot, 1] - sole_r[t, k, 1] < PIVOT_SWITCH_M:
+                k = pivot
+            if anchor is None:
+                anchor = sole_r[t, k].copy()
+            elif k != pivot:
+                anchor = target[t - 1] + (sole_r[t - 1, k] - ankle_r[t - 1]) + step
+            else:
+                anchor = anchor + step
+            pivot = k
+            anchor[1] = 0.0
+            target[t] = anchor - offsets[k]
+            weight[t] = 1.0
+        # Sideways, keep the foot where the source puts it on average over the contact.
+        target[s:e, 0] += ankle_r[s:e, 0].mean() - target[s:e, 0].mean()
+        # Blend the correction in before and out after the contact.
+        for d in range(1, blend + 1):
+            w = 0.5 * (1 + np.cos(np.pi * d / (blend + 1)))
+            for t, ref in ((s - d, s), (e - 1 + d, e - 1)):
+                if 0 <= t < t_n and weight[t] < w:
+                    target[t] = ankle_r[t] + (target[ref] - ankle_r[ref])
+                    weight[t] = w
+    unroll = lambda x: np.roll(x, shift, axis=0)  # noqa: E731
+    return unroll(target), unroll(weight)
+
+
+def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
+    """Minimum height of the lowest sole point over each swing: ``height``·sin(π·progress)."""
+    out = np.zeros(len(contact))
+    if height <= 0 or contact.all() or not contact.any():
+        return out
+    shift = int(np.argmax(contact))
+    c = np.roll(contact, -shift)
+    for s, e in _intervals(~c):
+        u = (np.arange(s, e) - s + 1) / (e - s + 1)
+        # A square-rooted half sine: the foot leaves and meets the ground steeply, not grazing it.
+        out[s:e] = height * np.sqrt(np.sin(np.pi * u))
+    return np.roll(out, shift)
+
+
+def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: float = 0.0,
+               floor_y: float | None = None, cyclic: bool = True, iterations: int = 2,
+               clearance_m: float = 0.0, reference: Motion | None = None) -> Motion:
+    """Apply the contact clean-up to a motion; ``contacts`` maps "l"/"r" to T booleans.
+
+    ``clearance_m`` lifts a swinging foot whose lowest point would pass lower than a half-sine
+    profile of that peak height (a foot must clear the ground, or it would scuff). ``reference``
+    (same skeleton and length) supplies where planted feet go, e.g. the motion before the pelvis
+    was moved for balance, so that moving the pelvis does not move the footprints.
+    """
+    belt = np.array([0.0, 0.0, -belt_speed])
+    points = sole_points(motion, floor_y)
+    roles = role_indices(motion)
+    rot, root = motion.rotations.copy(), motion.root_translation.copy()
+    rot = flatten_feet(motion, rot, root, contacts, cyclic)
+    for it in range(iterations):
+        grot, gpos = motion.global_transforms(rot, root)
+        rgrot, rgpos = (grot, gpos) if reference is None or it > 0 else reference.global_transforms()
+        targets = {}
+        for s in SIDES:
+            ankle = gpos[:, roles[f"{s}_ankle"]]
+            sole = sole_positions(grot, gpos, points[s])
+            rsole = sole_positions(rgrot, rgpos, points[s])
+            rankle = rgpos[:, roles[f"{s}_ankle"]]
+            tgt, w = contact_targets(rsole, rankle, contacts[s], belt, motion.fps, cyclic=cyclic)
+            tgt = rankle + w[:, None] * (tgt - rankle)
+            # Out of contact the foot follows the motion (blended near contacts from the reference).
+            tgt = np.where(w[:, None] > 0, tgt, ankle)
+            # Never below the ground, in or out of contact; clear it in swing.
+            low = sole[:, :, 1].min(axis=1) + (tgt[:, 1] - ankle[:, 1])
+            floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(len(low))
+            tgt[:, 1] += np.maximum(0.0, floor - low)
+            targets[s] = tgt
+        root = _lower_pelvis(motion, gpos, roles, targets, root, cyclic)
+        grot, gpos = motion.global_transforms(rot, root)
+        for s in SIDES:
+            rot = two_bone_ik(motion, rot, root, s, targets[s], grot[:, roles[f"{s}_ankle"]])
+    out = motion.replace(rotations=rot, root_translation=root)
+    out.metadata["foot_cleanup"] = True
+    return out
+
+
+def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.7) -> np.ndarray:
+    """0…1 per frame: how flat a foot should be — ramps up over the first ``rise`` of each contact
+    (heel strike → foot flat), holds, and ramps down after ``fall`` (heel rise before push-off)."""
+    out = np.zeros(len(contact))
+    if not contact.any():
+        return out
+    shift = int(np.argmin(contact)) if not contact.all() else 0
+    c = np.roll(contact, -shift)
+    for s, e in _intervals(c):
+        u = (np.arange(s, e) - s + 0.5) / (e - s)
+        out[s:e] = np.clip(np.minimum(u / rise, (1.0 - u) / (1.0 - fall)), 0.0, 1.0)
+    return np.roll(out, shift)
+
+
+def _contact_mean_yaw(yaw: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    """Heading per frame, constant (its circular mean) within each contact: a planted foot does
+    not turn on the ground."""
+    out = yaw.copy()
+    shift = int(np.argmin(contact)) if not contact.all() else 0
+    c, y = np.roll(contact, -shift), np.roll(out, -shift)
+    for s, e in _intervals(c):
+        y[s:e] = np.arctan2(np.sin(y[s:e]).mean(), np.cos(y[s:e]).mean())
+    return np.roll(y, shift)
+
+
+def flatten_feet(motion: Motion, rot: np.ndarray, root: np.ndarray, contacts: dict[str, np.ndarray],
+                 cyclic: bool = True) -> np.ndarray:
+    """Turn planted feet flat on the ground (keeping their heading) during mid-stance.
+
+    The rest pose stands flat, so a flat foot is a pure heading rotation of the rest orientation.
+    """
+    roles = role_indices(motion)
+    out = rot.copy()
+    grot, _ = motion.global_transforms(rot, root)
+    for s in SIDES:
+        ankle, knee = roles[f"{s}_ankle"], roles[f"{s}_knee"]
+        fwd = quat.rotate(grot[:, ankle], np.array([0.0, 0.0, 1.0]))
+        yaw = _contact_mean_yaw(np.arctan2(fwd[:, 0], fwd[:, 2]), contacts[s])
+        flat = quat.from_axis_angle(np.stack([0 * yaw, yaw, 0 * yaw], -1))
+        want = quat.slerp(grot[:, ankle], flat, flat_weight(contacts[s]))
+        out[:, ankle] = quat.mul(quat.inv(grot[:, knee]), want)
+    return out
+
+
+def _lower_pelvis(motion, gpos, roles, targets, root, cyclic):
+    """Lower the root where an ankle target lies beyond the leg's reach (smoothly over time)."""
+    drop = np.zeros(motion.n_frames)
+    for s in SIDES:
+        hip = gpos[:, roles[f"{s}_hip"]]
+        reach = (np.linalg.norm(gpos[0, roles[f"{s}_knee"]] - gpos[0, roles[f"{s}_hip"]]) +
+                 np.linalg.norm(gpos[0, roles[f"{s}_ankle"]] - gpos[0, roles[f"{s}_knee"]])) * 0.995
+        d = targets[s] - hip
+        horiz = np.linalg.norm(d[:, [0, 2]], axis=1)
+        need_y = np.sqrt(np.maximum(reach**2 - horiz**2, 0.0))
+        drop = np.maximum(drop, -d[:, 1] - need_y)
+    drop = np.maximum(drop, 0.0)
+    if drop.max() <= 0:
+        return root
+    mode = "wrap" if cyclic else "nearest"
+    # Widen, then smooth: the lowered pelvis follows a smooth curve that still covers every need.
+    smooth = gaussian_filter1d(maximum_filter1d(drop, 7, mode=mode), 2.0, mode=mode)
+    smooth = np.maximum(smooth, drop)
+    out = root.copy()
+    out[:, 1] -= smooth
+    return out

@@ -1,0 +1,342 @@
+"""Built-in walking and jogging generator driven by gait parameters.
+
+The basis is real data: the normative adult walking kinematics of CGM2.3 (pelvis, hip, knee,
+ankle, spine, shoulder, elbow angles over the cycle). A walk plays these curves time-warped to
+the requested stance fraction; a jog warps them to a short stance with a flight phase, deepens
+knee flexion (stance ≈ 35–40°, swing ≈ 90°), flexes the elbows and leans the trunk, following the
+running literature (Novacheck 1998, *Gait & Posture* 7:77). Every curve is then shaped by the
+:class:`GaitParams` (arm swing/bob/abduction scale about the curve's mean as in the thesis
+modifier). The hip flexion amplitude is fitted so that the stance foot travels exactly one step
+length backwards (speed / step rate), the pelvis height keeps the stance foot on the ground
+(ballistic in flight), and the foot clean-up pins planted feet to the treadmill belt.
+
+Examples
+--------
+>>> m = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.3), height_m=1.75)  # doctest: +SKIP
+>>> round(m.metadata["cadence_spm"])                                                         # doctest: +SKIP
+112
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from stimuli.errors import StimuliError
+from stimuli.motion import quat
+from stimuli.motion.anthropometry import skeleton_points
+from stimuli.motion.balance import balance
+from stimuli.motion.footfix import clean_feet, sole_points, sole_positions
+from stimuli.motion.motion import Motion
+from stimuli.motion.normative import TOE_OFF, curve
+
+GRAVITY = 9.81
+# Peak height of the lowest point of a swinging foot (walking: toe clearance ~1.5 cm at its
+# minimum, Winter 1992; the half-sine profile peaks mid-swing).
+SWING_CLEARANCE_M = {"walk": 0.04, "jog": 0.08}
+
+# Joint tree of the generator's skeleton: (name, parent). Names are the roles of skeleton.py.
+TREE = [("pelvis", None)]
+for _s in ("l", "r"):
+    TREE += [(f"{_s}_hip", "pelvis"), (f"{_s}_knee", f"{_s}_hip"), (f"{_s}_ankle", f"{_s}_knee"),
+             (f"{_s}_heel", f"{_s}_ankle"), (f"{_s}_toe", f"{_s}_ankle"), (f"{_s}_toe_end", f"{_s}_toe")]
+TREE += [("spine", "pelvis"), ("chest", "spine"), ("neck", "chest"), ("head", "neck"), ("head_end", "head")]
+for _s in ("l", "r"):
+    TREE += [(f"{_s}_clavicle", "chest"), (f"{_s}_shoulder", f"{_s}_clavicle"), (f"{_s}_elbow", f"{_s}_shoulder"),
+             (f"{_s}_wrist", f"{_s}_elbow"), (f"{_s}_hand_end", f"{_s}_wrist")]
+
+# Gait-specific defaults (walk: CGM2.3 normative; jog: Novacheck 1998 typical jogging values).
+GAIT_DEFAULTS = {
+    "walk": dict(stance_fraction=0.61, trunk_lean_deg=2.0, elbow_flexion_deg=0.0, arm_swing_ratio=1.0,
+                 knee_stance_gain=1.0, knee_swing_gain=1.0, hip_flexion_offset_deg=0.0),
+    "jog": dict(stance_fraction=0.40, trunk_lean_deg=7.0, elbow_flexion_deg=55.0, arm_swing_ratio=1.3,
+                knee_stance_gain=2.0, knee_swing_gain=1.5, hip_flexion_offset_deg=6.0),
+}
+
+
+@dataclass
+class GaitParams:
+    """Parameters of a generated gait (angles in degrees, lengths in metres).
+
+    ``None`` takes the gait's default from GAIT_DEFAULTS. Ratios scale a curve about its mean
+    (1 = normative); offsets shift it.
+    """
+
+    gait: str = "walk"
+    cadence_spm: float = 112.0
+    speed_mps: float = 1.3
+    stance_fraction: float | None = None
+    walking_base_m: float = 0.10
+    toe_out_deg: float = 7.0
+    knee_flexion_scale: float = 1.0
+    knee_stance_gain: float | None = None
+    knee_swing_gain: float | None = None
+    hip_flexion_offset_deg: float | None = None
+    pelvis_rotation_scale: float = 1.0
+    pelvis_obliquity_scale: float = 1.0
+    trunk_lean_deg: float | None = None
+    trunk_rotation_scale: float = 1.0
+    arm_swing_ratio: float | None = None
+    arm_abduction_deg: float = 3.0
+    arm_bob_ratio: float = 1.0
+    elbow_flexion_deg: float | None = None
+    head_stabilisation: float = 0.7
+    arm_phase: float = 0.0
+    style: dict = field(default_factory=dict)
+
+    def resolved(self) -> "GaitParams":
+        """A copy with gait defaults filled in; StimuliError for an unknown gait or bad values."""
+        if self.gait not in GAIT_DEFAULTS:
+            raise StimuliError(f"gait must be one of {', '.join(GAIT_DEFAULTS)}, got {self.gait!r}")
+        values = asdict(self)
+        for k, v in GAIT_DEFAULTS[self.gait].items():
+            if values[k] is None:
+                values[k] = v
+        out = GaitParams(**values)
+        if not 20 <= out.cadence_spm <= 260:
+            raise StimuliError(f"cadence_spm must be within 20–260 steps/min, got {out.cadence_spm}")
+        if not 0.0 <= out.speed_mps <= 8.0:
+            raise StimuliError(f"speed_mps must be within 0–8 m/s, got {out.speed_mps}")
+        if not 0.2 <= out.stance_fraction <= 0.8:
+            raise StimuliError(f"stance_fraction must be within 0.2–0.8, got {out.stance_fraction}")
+        return out
+
+    @property
+    def step_length_m(self) -> float:
+        return self.speed_mps * 60.0 / self.cadence_spm
+
+
+def canonical_skeleton(height_m: float) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Joint names, parents and rest offsets of the generator's skeleton for a stature."""
+    pts = skeleton_points(height_m)
+    names = [n for n, _ in TREE]
+    parents = np.array([-1 if p is None else names.index(p) for _, p in TREE])
+    offsets = np.stack([pts[n] - (pts[p] if p else np.zeros(3)) for n, p in TREE])
+    offsets[0] = 0.0
+    return names, parents, offsets
+
+
+def _warp(phi: np.ndarray, stance: float) -> np.ndarray:
+    """Output cycle fraction → normative cycle fraction, mapping stance onto the normative stance."""
+    phi = np.mod(phi, 1.0)
+    return np.where(phi < stance, phi / stance * TOE_OFF,
+                    TOE_OFF + (phi - stance) / (1.0 - stance) * (1.0 - TOE_OFF))
+
+
+def _about_mean(f, psi: np.ndarray, ratio: float) -> np.ndarray:
+    """Curve values scaled about the curve's cycle mean: (v − mean)·ratio + mean."""
+    grid = np.linspace(0, 1, 100, endpoint=False)
+    m = float(np.mean(f(grid)))
+    return (f(psi) - m) * ratio + m
+
+
+def _rx(a):
+    return quat.from_axis_angle(np.stack([a, 0 * a, 0 * a], -1))
+
+
+def _ry(a):
+    return quat.from_axis_angle(np.stack([0 * a, a, 0 * a], -1))
+
+
+def _rz(a):
+    return quat.from_axis_angle(np.stack([0 * a, 0 * a, a], -1))
+
+
+def _leg_angles(p: GaitParams, psi: np.ndarray, hip_scale: float, sign: float, adduction: float):
+    """Hip, knee, ankle local quaternions for one leg at normative phases ``psi``."""
+    d = np.radians
+    # Hip flexion is measured from a pelvis tilted forward ~7° (Plug-in-Gait); our pelvis is level,
+    # so the thigh's angle to the vertical is hip flexion minus the mean pelvic tilt.
+    tilt = float(np.mean(curve("PelvisAngles", "X")(np.linspace(0, 1, 100, endpoint=False))))
+    hip_flex = _about_mean(curve("HipAngles", "X"), psi, hip_scale) - tilt + p.hip_flexion_offset_deg
+    hip_add = _about_mean(curve("HipAngles", "Y"), psi, 1.0) - np.mean(curve("HipAngles", "Y")(np.linspace(0, 1, 100)))
+    # Knee: deeper stance flexion for a jog (a smooth bump over stance), deeper swing flexion.
+    bump = np.where(psi < TOE_OFF, np.sin(np.pi * psi / TOE_OFF) ** 2, 0.0)
+    gain = p.knee_swing_gain + (p.knee_stance_gain - p.knee_swing_gain) * bump
+    gain = np.where(psi < TOE_OFF, gain, p.knee_swing_gain)
+    knee = np.maximum(curve("KneeAngles", "X")(psi), 0.0) * gain * p.knee_flexion_scale
+    ankle = curve("AnkleAngles", "X")(psi)
+    hip = quat.mul(_rx(-d(hip_flex)), quat.mul(_rz(-sign * d(hip_add + adduction)), _ry(sign * d(p.toe_out_deg))))
+    return hip, _rx(d(knee)), _rx(-d(ankle))
+
+
+def _pose(p: GaitParams, names: list[str], phi: np.ndarray, hip_scale: float, adduction: float) -> np.ndarray:
+    """Local rotations (T×J×4) for cycle fractions ``phi`` of the left leg."""
+    d = np.radians
+    t = len(phi)
+    rot = np.tile(quat.IDENTITY, (t, len(names), 1))
+    psi = {"l": _warp(phi, p.stance_fraction), "r": _warp(phi + 0.5, p.stance_fraction)}
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        hip, knee, ankle = _leg_angles(p, psi[s], hip_scale, sign, adduction)
+        rot[:, names.index(f"{s}_hip")] = hip
+        rot[:, names.index(f"{s}_knee")] = knee
+        rot[:, names.index(f"{s}_ankle")] = ankle
+        # Arms swing opposite to the legs: the normative shoulder curve is already of that side.
+        pa = psi[s] + p.arm_phase
+        flex = _about_mean(curve("ShoulderAngles", "X"), pa, p.arm_swing_ratio) - \
+            np.mean(curve("ShoulderAngles", "X")(np.linspace(0, 1, 100)))
+        abd = _about_mean(curve("ShoulderAngles", "Y"), pa, p.arm_bob_ratio) + p.arm_abduction_deg
+        elbow = curve("ElbowAngles", "X")(pa) + p.elbow_flexion_deg
+        rot[:, names.index(f"{s}_shoulder")] = quat.mul(_rx(-d(flex)), _rz(sign * d(abd)))
+        rot[:, names.index(f"{s}_elbow")] = _rx(-d(elbow))
+    # Pelvis (left-side curves; left forward = negative yaw about +y).
+    pl = psi["l"]
+    yaw = -_about_mean(curve("PelvisAngles", "Z"), pl, p.pelvis_rotation_scale)
+    yaw -= np.mean(yaw)
+    roll = _about_mean(curve("PelvisAngles", "Y"), pl, p.pelvis_obliquity_scale)
+    roll -= np.mean(roll)
+    tilt = curve("PelvisAngles", "X")(pl)
+    tilt -= np.mean(tilt)
+    rot[:, 0] = quat.mul(_ry(d(yaw)), quat.mul(_rz(d(roll)), _rx(d(tilt))))
+    # Trunk: thorax counter-rotation relative to the pelvis, split over spine and chest.
+    tz = -_about_mean(curve("SpineAngles", "Z"), pl, p.trunk_rotation_scale)
+    tz -= np.mean(tz)
+    ty = curve("SpineAngles", "Y")(pl)
+    ty -= np.mean(ty)
+    half = quat.mul(_ry(d(tz) / 2), quat.mul(_rz(d(ty) / 2), _rx(d(p.trunk_lean_deg) / 2 - d(tilt) / 2)))
+    rot[:, names.index("spine")] = half
+    rot[:, names.index("chest")] = half
+    return rot
+
+
+def _stabilise_head(names, parents, offsets, rot, root, amount: float) -> np.ndarray:
+    """Turn the head towards upright/forward by ``amount`` (0 = follows the trunk, 1 = fixed)."""
+    m = Motion(fps=1.0, joint_names=names, parents=parents, offsets=offsets, rotations=rot, root_translation=root)
+    grot, _ = m.global_transforms()
+    neck = names.index("neck")
+    want = quat.slerp(grot[:, neck], np.tile(quat.IDENTITY, (len(rot), 1)), np.full(len(rot), amount))
+    out = rot.copy()
+    out[:, names.index("head")] = quat.mul(quat.inv(grot[:, neck]), want)
+    return out
+
+
+def _stance_travel(m: Motion, stance: np.ndarray) -> float:
+    """Mean backward travel (m) of the left ankle relative to the pelvis during stance."""
+    z = m.positions()[:, m.index("l_ankle"), 2]
+    first = int(np.argmax(stance))
+    last = first + int(np.argmin(stance[first:])) - 1 if not stance[first:].all() else len(stance) - 1
+    return float(z[first] - z[last]) * (last - first + 1) / max(last - first, 1)
+
+
+def _walking_base(m: Motion, stance: dict) -> float:
+    """Mean lateral distance (m) between the two ankles, each averaged over its stance frames."""
+    pos = m.positions()
+    xs = [pos[stance[s], m.index(f"{s}_ankle"), 0].mean() for s in ("l", "r")]
+    return float(xs[0] - xs[1])
+
+
+def _rollover(m: Motion) -> float:
+    """Forward distance from the heel contact point to the ball: how far the ankle advances over
+    the ground while the foot rolls from heel strike to push-off."""
+    pts = sole_points(m, floor_y=-skeleton_floor(m))["l"]
+    return float(pts[1][1][2] - pts[0][1][2]) if len(pts) > 1 else 0.0
+
+
+def _root_height(m: Motion, stance: dict, fps: float) -> np.ndarray:
+    """Pelvis height putting the lowest sole point of a stance foot on the ground; ballistic in flight."""
+    grot, gpos = m.global_transforms()
+    pts = sole_points(m, floor_y=0.0 - skeleton_floor(m))
+    need = {s: -sole_positions(grot, gpos, pts[s])[:, :, 1].min(axis=1) for s in ("l", "r")}
+    # In double support the lower requirement wins: the other knee bends a little more (IK),
+    # whereas a pelvis too high would leave a foot floating out of reach.
+    both = np.stack([np.where(stance[s], need[s], np.inf) for s in ("l", "r")])
+    h = both.min(axis=0)
+    flight = ~np.isfinite(h)
+    if flight.any():
+        h = _ballistic(h, flight, fps)
+    return gaussian_filter1d(h, 1.0, mode="wrap")
+
+
+def skeleton_floor(m: Motion) -> float:
+    """Height of the root above the lowest rest joint (the rest pose stands on the ground)."""
+    return float(-m.rest_positions()[:, 1].min())
+
+
+def _ballistic(h: np.ndarray, flight: np.ndarray, fps: float) -> np.ndarray:
+    """Fill flight frames with a parabola under gravity joining the neighbouring stance heights."""
+    n = len(h)
+    out = h.copy()
+    shift = int(np.argmin(flight))
+    hr, fr = np.roll(out, -shift), np.roll(flight, -shift)
+    d = np.diff(np.concatenate([[0], fr.astype(int), [0]]))
+    for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):
+        h0, h1 = hr[s - 1], hr[e % n]
+        t0, t1 = (s - 1) / fps, e / fps
+        t = np.arange(s, e) / fps
+        hr[s:e] = h0 + (h1 - h0) * (t - t0) / (t1 - t0) + 0.5 * GRAVITY * (t - t0) * (t1 - t)
+    return np.roll(hr, shift)
+
+
+def _flatten_toes(m: Motion) -> np.ndarray:
+    """Bend the toes up when the ball is near the ground and the foot pitches down (push-off)."""
+    rot = m.rotations.copy()
+    grot, gpos = m.global_transforms()
+    for s in ("l", "r"):
+        toe = m.index(f"{s}_toe")
+        fwd = quat.rotate(grot[:, toe], np.array([0.0, 0.0, 1.0]))
+        pitch = np.arctan2(-fwd[:, 1], np.linalg.norm(fwd[:, [0, 2]], axis=1))  # > 0: toes point down
+        near = np.clip((0.04 - gpos[:, toe, 1]) / 0.03, 0.0, 1.0)
+        bend = np.maximum(pitch, 0.0) * near
+        rot[:, toe] = quat.mul(rot[:, toe], _rx(-bend))
+    return rot
+
+
+def generate(params: GaitParams, height_m: float = 1.75, fps: float = 30.0, cycles: int = 2,
+             cleanup: bool = True) -> Motion:
+    """A looped treadmill walk or jog of ``cycles`` gait cycles for a body of stature ``height_m``.
+
+    The clip has a whole number of frames; the cycle time is rounded to fit (cadence error below
+    one step/min at 30 fps for two cycles). Metadata records the gait parameters, cadence, speed,
+    step length and belt speed.
+    """
+    p = params.resolved()
+    if not 0.5 <= height_m <= 2.5:
+        raise StimuliError(f"height_m must be within 0.5–2.5 m, got {height_m}")
+    n = int(round(cycles * 120.0 / p.cadence_spm * fps))
+    if n < 8:
+        raise StimuliError(f"{cycles} cycle(s) at {p.cadence_spm} steps/min give only {n} frames at {fps} fps")
+    cycle_s = n / fps / cycles
+    cadence = 120.0 / cycle_s
+    phi = (np.arange(n) / fps / cycle_s) % 1.0
+    names, parents, offsets = canonical_skeleton(height_m)
+    hip_w = 2 * offsets[names.index("l_hip"), 0]
+    leg = np.linalg.norm(offsets[names.index("l_knee")]) + np.linalg.norm(offsets[names.index("l_ankle")])
+    adduction = np.degrees(np.arcsin(np.clip((hip_w - p.walking_base_m) / 2 / leg, -0.5, 0.5)))
+    stance = {"l": phi < p.stance_fraction, "r": ((phi + 0.5) % 1.0) < p.stance_fraction}
+    zero = np.zeros((n, 3))
+    # Fit the hip flexion amplitude so the stance foot travels one step length of belt per stance.
+    want = p.speed_mps * p.stance_fraction * cycle_s
+    hip_scale = 1.0
+    base_gain = 1.0
+    want -= _rollover(Motion(fps, names, parents, offsets, np.tile(quat.IDENTITY, (1, len(names), 1)), zero[:1]))
+    for _ in range(4):
+        m = Motion(fps, names, parents, offsets, _pose(p, names, phi, hip_scale, adduction), zero)
+        got = _stance_travel(m, stance["l"])
+        hip_scale = float(np.clip(hip_scale * want / max(got, 1e-3), 0.3, 2.5))
+        # Walking base: the lateral distance between the ankles at mid-stance.
+        base = _walking_base(m, stance)
+        adduction += np.degrees((base - p.walking_base_m) / 2 / leg)
+    rot = _pose(p, names, phi, hip_scale, adduction)
+    m = Motion(fps, names, parents, offsets, rot, zero)
+    root = zero.copy()
+    root[:, 1] = _root_height(m, stance, fps)
+    rot = _stabilise_head(names, parents, offsets, rot, root, p.head_stabilisation)
+    m = Motion(fps, names, parents, offsets, rot, root)
+    m = m.replace(rotations=_flatten_toes(m))
+    meta = {"source": "generator", "gait": p.gait, "cadence_spm": cadence, "speed_mps": p.speed_mps,
+            "belt_speed_mps": p.speed_mps, "step_length_m": p.speed_mps * 60.0 / cadence, "cycles": cycles,
+            "stance_fraction": p.stance_fraction, "treadmill": True, "looped": True, "height_m": height_m,
+            "hip_flexion_scale": hip_scale, "params": asdict(p), "naming": "canonical",
+            "contacts": {s: stance[s].astype(int).tolist() for s in ("l", "r")}}
+    m = m.replace(metadata=meta)
+    if cleanup:
+        floor = -skeleton_floor(m)
+        m = clean_feet(m, stance, belt_speed=p.speed_mps, floor_y=floor, cyclic=True,
+                       clearance_m=SWING_CLEARANCE_M[p.gait])
+        planted = m
+        m = balance(m, stance, floor_y=floor)
+        m = clean_feet(m, stance, belt_speed=p.speed_mps, floor_y=floor, cyclic=True,
+                       clearance_m=SWING_CLEARANCE_M[p.gait], reference=planted)
+    return m

@@ -1,0 +1,195 @@
+"""Whole gait cycles, seamless loops and treadmill display.
+
+* :func:`face_forward` turns a motion about the vertical so that it progresses along +z.
+* :func:`to_treadmill` removes the root's forward progression (a straight-line fit) and records
+  it as the belt speed, so a planted foot moves backwards at belt speed.
+* :func:`trim_cycles` keeps whole gait cycles (left heel strike to left heel strike, inclusive).
+* :func:`make_loop` closes a trimmed clip: a cubic Hermite correction spread over the clip makes
+  the last frame continue into the first in both pose and velocity; the duplicate end frame is
+  dropped so that playing the clip on repeat has no seam.
+* :func:`seam_error` measures how smooth the wrap-around is compared with the clip's interior.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stimuli.errors import StimuliError
+from stimuli.motion import quat
+from stimuli.motion.events import cycle_starts, gait_events
+from stimuli.motion.motion import Motion
+
+UP = np.array([0.0, 1.0, 0.0])
+
+
+def rotate_world(motion: Motion, q: np.ndarray) -> Motion:
+    """Rotate the whole motion about the world origin by ``q`` (root rotation and translation)."""
+    rot = motion.rotations.copy()
+    rot[:, 0] = quat.mul(q, rot[:, 0])
+    return motion.replace(rotations=rot, root_translation=quat.rotate(q, motion.root_translation))
+
+
+def face_forward(motion: Motion) -> Motion:
+    """Turn the motion about y so that the walker faces (and progresses along) +z."""
+    fwd = gait_events(motion)["forward"]
+    yaw = np.arctan2(fwd[0], fwd[2])
+    q = quat.from_axis_angle(UP * -yaw)
+    return rotate_world(motion, q)
+
+
+def to_treadmill(motion: Motion) -> Motion:
+    """Remove forward and sideways progression of the root; record the belt speed (m/s).
+
+    The motion is first turned to face +z. The root's horizontal path is fitted by a straight line
+    in time; its slope along +z is the belt speed, and the fitted line is subtracted so the body
+    stays in place (its mean horizontal position at the origin).
+    """
+    motion = face_forward(motion)
+    t = np.arange(motion.n_frames) / motion.fps
+    root = motion.root_translation.copy()
+    belt = 0.0
+    for axis in (0, 2):
+        slope, intercept = np.polyfit(t, root[:, axis], 1) if motion.n_frames > 1 else (0.0, root[0, axis])
+        root[:, axis] -= slope * t + intercept
+        if axis == 2:
+            belt = float(slope)
+    out = motion.replace(root_translation=root)
+    out.metadata.update(treadmill=True, belt_speed_mps=belt,
+                        speed_mps=belt if "speed_mps" not in motion.metadata else motion.metadata["speed_mps"])
+    out.metadata["belt_speed_mps"] = belt
+    return out
+
+
+def trim_cycles(motion: Motion, cycles: int | None = None) -> Motion:
+    """Frames from one left heel strike to the heel strike ``cycles`` later, both included.
+
+    ``cycles=None`` keeps as many whole cycles as the clip holds. StimuliError when the clip is
+    shorter than the cycles asked for.
+    """
+    hs = cycle_starts(motion)
+    available = len(hs) - 1
+    n = available if cycles is None else int(cycles)
+    if n < 1 or n > available:
+        raise StimuliError(f"{motion.metadata.get('source', 'motion')}: asked for {n} whole gait cycle(s), "
+                           f"the clip holds {available}")
+    out = motion.slice(int(hs[0]), int(hs[n]) + 1)
+    out.metadata["cycles"] = n
+    return out
+
+
+def _hermite(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Hermite basis h01 (position) and h11 (end tangent) on s = 0…1 over ``n`` frames."""
+    s = np.linspace(0.0, 1.0, n)
+    return -2 * s**3 + 3 * s**2, s**3 - s**2
+
+
+def close_loop(motion: Motion) -> Motion:
+    """Make frame T−1 equal frame 0 in pose and velocity, then drop it (see module docstring)."""
+    t = motion.n_frames
+    if t < 4:
+        raise StimuliError("motion: a loop needs at least 4 frames")
+    h01, h11 = _hermite(t)
+    span = t - 1
+    # Root translation: position and velocity mismatch at the ends.
+    x = motion.root_translation
+    dx = x[0] - x[-1]
+    dv = (x[1] - x[0]) - (x[-1] - x[-2])
+    root = x + h01[:, None] * dx + h11[:, None] * span * dv
+    # Rotations: the same correction in the tangent space (rotation vectors) of each joint.
+    q = quat.unroll(motion.rotations)
+    d = quat.to_axis_angle(quat.mul(quat.inv(q[-1]), q[0]))
+    w0 = quat.to_axis_angle(quat.mul(quat.inv(q[0]), q[1]))
+    wt = quat.to_axis_angle(quat.mul(quat.inv(q[-2]), q[-1]))
+    corr = h01[:, None, None] * d + h11[:, None, None] * span * (w0 - wt)
+    rot = quat.mul(q, quat.from_axis_angle(corr))
+    closed = motion.replace(rotations=rot[:-1], root_translation=root[:-1])
+    closed.metadata["looped"] = True
+    return closed
+
+
+def repeat(motion: Motion, times: int) -> Motion:
+    """A looped clip played ``times`` times in a row (root translation continued)."""
+    if times <= 1:
+        return motion
+    rot = np.concatenate([motion.rotations] * times)
+    root = np.concatenate([motion.root_translation] * times)
+    if not motion.metadata.get("treadmill"):
+        step = motion.root_translation[-1] - motion.root_translation[0]
+        step = step + (motion.root_translation[-1] - motion.root_translation[-2])
+        step[1] = 0.0
+        root = root + np.repeat(np.arange(times), motion.n_frames)[:, None] * step
+    out = motion.replace(rotations=rot, root_translation=root)
+    out.metadata["cycles"] = int(motion.metadata.get("cycles", 1)) * times
+    return out
+
+
+def make_loop(motion: Motion, cycles: int | None = None, treadmill: bool = True) -> Motion:
+    """Trim to whole cycles, optionally put on a treadmill, close the loop.
+
+    If the clip holds fewer cycles than asked for, the cycles it holds are looped and repeated
+    (``cycles`` must then be a multiple of them).
+    """
+    hs = cycle_starts(motion)
+    available = len(hs) - 1
+    want = available if cycles is None else int(cycles)
+    use = want if want <= available else max(k for k in range(1, available + 1) if want % k == 0)
+    clip = trim_cycles(motion, use)
+    fps = clip.fps
+    # Cadence of the trimmed clip: two steps per cycle over its span.
+    cadence = 120.0 * use / ((clip.n_frames - 1) / fps)
+    if treadmill:
+        clip = to_treadmill(clip)
+    looped = close_loop(clip)
+    looped.metadata.update(cycles=use, cadence_spm=float(cadence))
+    return repeat(looped, want // use)
+
+
+def retime(motion: Motion, factor: float) -> Motion:
+    """Play ``factor`` times faster (cadence × factor) at the same frame rate; speed × factor."""
+    if factor <= 0:
+        raise StimuliError(f"retime: factor must be > 0, got {factor}")
+    span = motion.n_frames / motion.fps / factor
+    n = max(int(round(span * motion.fps)), 2)
+    # Sample the periodic clip: times wrap so the loop stays closed.
+    src_t = (np.arange(n) / motion.fps * factor)
+    rot, root = _sample_periodic(motion, src_t) if motion.metadata.get("looped") else motion.sample(src_t)
+    out = motion.replace(rotations=rot, root_translation=root)
+    for key in ("cadence_spm", "speed_mps", "belt_speed_mps"):
+        if key in motion.metadata:
+            out.metadata[key] = float(motion.metadata[key]) * factor
+    return out
+
+
+def _sample_periodic(motion: Motion, times: np.ndarray):
+    """Sample a looped clip at times in [0, duration): the last frame blends into the first."""
+    f = np.asarray(times) * motion.fps % motion.n_frames
+    i0 = np.floor(f).astype(int) % motion.n_frames
+    i1 = (i0 + 1) % motion.n_frames
+    a = f - np.floor(f)
+    rot = quat.slerp(motion.rotations[i0], motion.rotations[i1], np.repeat(a[:, None], motion.n_joints, 1))
+    r0, r1 = motion.root_translation[i0], motion.root_translation[i1]
+    if not motion.metadata.get("treadmill"):
+        # Crossing the seam of an overground loop: continue from the end rather than jump back.
+        jump = (motion.root_translation[-1] - motion.root_translation[0])
+        r1 = np.where((i1 == 0)[:, None], r1 + jump + (motion.root_translation[-1] - motion.root_translation[-2]), r1)
+    root = r0 * (1 - a[:, None]) + r1 * a[:, None]
+    return rot, root
+
+
+def seam_error(motion: Motion) -> dict:
+    """How smooth the wrap-around of a looped clip is.
+
+    Treats the clip as periodic and compares the joints' second differences (acceleration × dt²)
+    at the seam with the 99th percentile inside the clip. Overground clips are measured relative to
+    the root's horizontal position. Returns metres and the ratio (≈ 1 or less: seamless).
+    """
+    p = motion.positions()
+    if not motion.metadata.get("treadmill"):
+        p = p - motion.root_translation[:, None, :] * np.array([1.0, 0.0, 1.0])
+    acc = np.linalg.norm(np.roll(p, -1, 0) - 2 * p + np.roll(p, 1, 0), axis=-1).max(axis=1)
+    seam = float(max(acc[0], acc[-1]))
+    interior = float(np.percentile(acc[1:-1], 99)) if len(acc) > 3 else seam
+    jump = float(np.linalg.norm(p[0] - p[-1], axis=-1).max())
+    step = float(np.percentile(np.linalg.norm(np.diff(p, axis=0), axis=-1).max(axis=1), 99))
+    return {"seam_accel_m": seam, "interior_accel_p99_m": interior, "ratio": seam / max(interior, 1e-12),
+            "seam_step_m": jump, "interior_step_p99_m": step}

@@ -1,0 +1,255 @@
+"""Motion object, quaternions, BVH/AMASS import-export, namings, loops (stimuli.motion)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from stimuli.errors import StimuliError
+from stimuli.motion import Motion, quat
+from stimuli.motion.amass import SMPL_JOINTS, read_amass, write_amass
+from stimuli.motion.bvh import read_bvh, write_bvh
+from stimuli.motion.events import gait_events
+from stimuli.motion.loop import make_loop, seam_error, to_treadmill, trim_cycles
+from stimuli.motion.skeleton import detect_roles, load_mapping
+
+DATA = Path(__file__).resolve().parents[1] / "stimuli" / "data"
+WALK = DATA / "cmu_35_01_walk.bvh"
+RUN = DATA / "cmu_35_17_run.bvh"
+
+
+def chain_motion(t: int = 5) -> Motion:
+    rng = np.random.default_rng(0)
+    rot = quat.from_axis_angle(rng.normal(0, 0.5, (t, 3, 3)))
+    return Motion(fps=30.0, joint_names=["a", "b", "c"], parents=[-1, 0, 1],
+                  offsets=[[0, 0, 0], [0, 1, 0], [0.5, 0, 0]], rotations=rot,
+                  root_translation=rng.normal(0, 1, (t, 3)), metadata={"source": "test"})
+
+
+# ---------------------------------------------------------------- quaternions
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-3, 3), min_size=6, max_size=6))
+def test_quat_mul_matches_scipy(v):
+    a, b = np.array(v[:3]), np.array(v[3:])
+    got = quat.mul(quat.from_axis_angle(a), quat.from_axis_angle(b))
+    ref = Rotation.from_rotvec(a) * Rotation.from_rotvec(b)
+    assert np.allclose(quat.to_matrix(got), ref.as_matrix(), atol=1e-9)
+    x = np.array([0.3, -1.0, 2.0])
+    assert np.allclose(quat.rotate(got, x), ref.apply(x), atol=1e-9)
+
+
+def test_quat_mean_is_sign_invariant_and_exact_for_identical():
+    q = quat.from_axis_angle(np.array([0.2, 0.4, -0.1]))
+    samples = np.stack([q, -q, q])
+    assert np.allclose(np.abs(np.sum(quat.mean(samples) * q)), 1.0)
+    # Mean of ±10° about one axis is the identity.
+    pm = quat.from_axis_angle(np.array([[0, 0, 0.17], [0, 0, -0.17]]))
+    assert quat.angle(quat.mean(pm)) < 1e-9
+
+
+def test_from_euler_is_intrinsic_bvh_order():
+    # BVH "Zrotation Xrotation" = Rz · Rx, intrinsic.
+    q = quat.from_euler(np.array([30.0, 0.0, 45.0]), "ZYX")
+    ref = Rotation.from_euler("z", 30, degrees=True) * Rotation.from_euler("x", 45, degrees=True)
+    assert np.allclose(quat.to_matrix(q), ref.as_matrix())
+
+
+# ---------------------------------------------------------------- Motion + npz
+def test_forward_kinematics_of_a_chain():
+    m = chain_motion(1)
+    m.rotations[:] = quat.IDENTITY
+    m.rotations[0, 0] = quat.from_axis_angle(np.array([0, 0, np.pi / 2]))  # root turns 90° about z
+    p = m.positions()[0]
+    assert np.allclose(p[1] - p[0], [-1, 0, 0])
+    assert np.allclose(p[2] - p[1], [0, 0.5, 0])
+
+
+def test_npz_round_trip(tmp_path):
+    m = chain_motion()
+    m.metadata.update(gait="walk", cadence_spm=np.float64(112.0))
+    path = m.save(tmp_path / "m.npz")
+    back = Motion.load(path)
+    assert back.joint_names == m.joint_names and back.fps == m.fps
+    assert np.allclose(back.rotations, m.rotations) and np.allclose(back.root_translation, m.root_translation)
+    assert back.metadata["cadence_spm"] == 112.0
+    data = np.load(path)
+    assert set(data.files) == {"fps", "joint_names", "parents", "offsets", "rotations", "root_translation", "metadata"}
+    assert json.loads(str(data["metadata"]))["gait"] == "walk"
+
+
+def test_npz_errors_name_the_field(tmp_path):
+    np.savez(tmp_path / "bad.npz", fps=30.0, joint_names=np.array(["a"]))
+    with pytest.raises(StimuliError, match="missing field.*parents"):
+        Motion.load(tmp_path / "bad.npz")
+    m = chain_motion()
+    m.root_translation[2, 1] = np.nan
+    with pytest.raises(StimuliError, match="root_translation contains NaN"):
+        m.validate()
+
+
+def test_resample_keeps_the_path():
+    m = chain_motion(31)
+    up = m.resample(120.0)
+    assert up.n_frames == 121
+    assert np.allclose(up.positions()[::4], m.positions(), atol=1e-9)
+
+
+# ---------------------------------------------------------------- namings and mappings
+CMU_LIKE = ["Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "RightUpLeg", "RightLeg", "RightFoot",
+            "Spine", "Spine1", "Neck", "Head", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand"]
+
+
+@pytest.mark.parametrize("names,naming,role,joint", [
+    (CMU_LIKE, "cmu", "l_knee", "LeftLeg"),
+    (["mixamorig:" + n for n in CMU_LIKE], "mixamo", "l_elbow", "mixamorig:LeftForeArm"),
+    (["Hips", "LeftHip", "LeftKnee", "LeftAnkle", "RightHip", "RightKnee", "RightAnkle", "Chest", "Abdomen",
+      "Neck", "Head", "LeftCollar", "LeftShoulder", "LeftElbow", "LeftWrist"], "poser", "l_shoulder", "LeftShoulder"),
+    (["hip", "abdomen", "chest", "neck", "head", "lThigh", "lShin", "lFoot", "rThigh", "rShin", "rFoot",
+      "lCollar", "lShldr", "lForeArm", "lHand"], "daz", "l_elbow", "lForeArm"),
+])
+def test_naming_detection(names, naming, role, joint):
+    found = detect_roles(names)
+    assert found["naming"] == naming and found["roles"][role] == joint
+
+
+def test_unknown_naming_asks_for_a_mapping(tmp_path):
+    names = ["root", "thigh_l", "shin_l", "foot_l", "thigh_r", "shin_r", "foot_r"]
+    with pytest.raises(StimuliError, match="mapping file"):
+        detect_roles(names)
+    mapping = tmp_path / "map.yaml"
+    mapping.write_text("pelvis: root\nl_hip: thigh_l\nl_knee: shin_l\nl_ankle: foot_l\n"
+                       "r_hip: thigh_r\nr_knee: shin_r\nr_ankle: foot_r\n")
+    assert load_mapping(mapping, names)["roles"]["l_knee"] == "shin_l"
+    mapping.write_text("pelvis: root\nl_knee: nope\n")
+    with pytest.raises(StimuliError, match="'nope'"):
+        load_mapping(mapping, names)
+
+
+# ---------------------------------------------------------------- BVH
+def test_cmu_bvh_imports_in_metres():
+    m = read_bvh(WALK)
+    assert m.metadata["naming"] == "cmu" and m.metadata["dropped_reference_frame"]
+    assert m.fps == 120.0 and m.n_frames == 358
+    p = m.positions()
+    # Feet reach the ground, the pelvis is at a human hip height, the walk covers ~1.3 m/s.
+    assert abs(p[..., 1].min()) < 0.03
+    assert 0.85 < p[:, 0, 1].mean() < 1.1
+    disp = np.linalg.norm((p[-1, 0] - p[0, 0])[[0, 2]]) / (m.n_frames / m.fps)
+    assert 1.0 < disp < 1.6
+
+
+def _rewrite_channels(src: Path, dst: Path, order: str, scale: float) -> None:
+    """The same motion written with another rotation order and unit (via our exporter)."""
+    write_bvh(read_bvh(src), dst, order=order, scale=scale)
+
+
+@pytest.mark.parametrize("order,scale", [("XYZ", 100.0), ("YXZ", 1.0), ("ZXY", 1000.0)])
+def test_bvh_round_trip_any_order_and_unit(tmp_path, order, scale):
+    ref = read_bvh(WALK)
+    _rewrite_channels(WALK, tmp_path / "x.bvh", order, scale)
+    back = read_bvh(tmp_path / "x.bvh")
+    assert back.joint_names == ref.joint_names
+    assert np.allclose(back.positions(), ref.positions(), atol=2e-4)
+
+
+def test_z_up_bvh_is_turned_y_up(tmp_path):
+    ref = read_bvh(WALK)
+    from stimuli.motion.bvh import _conjugate
+    z_up = _conjugate(ref, quat.from_axis_angle(np.array([np.pi / 2, 0, 0])))  # y → z
+    write_bvh(z_up, tmp_path / "z.bvh")
+    back = read_bvh(tmp_path / "z.bvh")
+    assert np.allclose(back.positions(), ref.positions(), atol=2e-4)
+
+
+@pytest.mark.parametrize("text,msg", [
+    ("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0\n", "HIERARCHY section followed by MOTION"),
+    ("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0\nCHANNELS 1 Xposition\n}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0\n", "line"),
+    ("not a bvh at all", "not a readable BVH"),
+])
+def test_bad_bvh_is_a_user_error(tmp_path, text, msg):
+    (tmp_path / "bad.bvh").write_text(text)
+    with pytest.raises(StimuliError, match=msg):
+        read_bvh(tmp_path / "bad.bvh")
+
+
+def test_truncated_bvh_names_the_frames(tmp_path):
+    lines = WALK.read_text().splitlines()
+    (tmp_path / "cut.bvh").write_text("\n".join(lines[:200]) + "\n")
+    with pytest.raises(StimuliError, match="359 frames"):
+        read_bvh(tmp_path / "cut.bvh")
+
+
+# ---------------------------------------------------------------- AMASS
+def test_amass_round_trip(tmp_path):
+    rng = np.random.default_rng(1)
+    t = 20
+    poses = np.zeros((t, 156))
+    poses[:, 3:66] = rng.normal(0, 0.2, (t, 63))
+    poses[:, :3] = [np.pi / 2, 0, 0]  # AMASS: root turned so that the body stands in a z-up world
+    trans = np.column_stack([np.linspace(0, 1, t), np.zeros(t), np.full(t, 0.95)])
+    np.savez(tmp_path / "a.npz", poses=poses, trans=trans, mocap_framerate=60.0, betas=np.zeros(16),
+             gender="female")
+    m = read_amass(tmp_path / "a.npz")
+    assert m.joint_names == SMPL_JOINTS and m.fps == 60.0 and m.metadata["gender"] == "female"
+    p = m.positions()
+    # y-up: the head is above the pelvis; the walk went along the AMASS x axis.
+    assert (p[:, SMPL_JOINTS.index("head"), 1] > p[:, 0, 1] + 0.4).all()
+    write_amass(m, tmp_path / "b.npz")
+    back = read_amass(tmp_path / "b.npz")
+    assert np.allclose(back.positions(), p, atol=1e-9)
+
+
+def test_amass_errors(tmp_path):
+    np.savez(tmp_path / "a.npz", poses=np.zeros((3, 30)), trans=np.zeros((3, 3)), mocap_framerate=30.0)
+    with pytest.raises(StimuliError, match="at least 22 joints"):
+        read_amass(tmp_path / "a.npz")
+    np.savez(tmp_path / "b.npz", poses=np.zeros((3, 66)), trans=np.zeros((3, 3)))
+    with pytest.raises(StimuliError, match="mocap_framerate"):
+        read_amass(tmp_path / "b.npz")
+
+
+# ---------------------------------------------------------------- cycles, treadmill, loops
+def test_cmu_gait_events_and_trim():
+    m = read_bvh(WALK)
+    ev = gait_events(m)
+    assert len(ev["l_hs"]) >= 2 and len(ev["r_hs"]) >= 2
+    # Left and right heel strikes alternate.
+    assert ev["l_hs"][0] < ev["r_hs"][1] < ev["l_hs"][1]
+    one = trim_cycles(m, 1)
+    assert one.n_frames == ev["l_hs"][1] - ev["l_hs"][0] + 1
+    with pytest.raises(StimuliError, match="asked for 5"):
+        trim_cycles(m, 5)
+
+
+def test_short_clip_is_a_user_error():
+    m = read_bvh(WALK).slice(0, 40)
+    with pytest.raises(StimuliError, match="fewer than one whole gait cycle"):
+        make_loop(m)
+
+
+def test_treadmill_records_belt_speed_and_stays_in_place():
+    m = to_treadmill(trim_cycles(read_bvh(WALK), 1))
+    assert 1.1 < m.metadata["belt_speed_mps"] < 1.5
+    root = m.root_translation
+    assert np.ptp(root[:, 2]) < 0.1 and np.ptp(root[:, 0]) < 0.1
+
+
+@pytest.mark.parametrize("path", [WALK, RUN])
+def test_loops_are_seamless(path):
+    loop = make_loop(read_bvh(path), cycles=2)
+    err = seam_error(loop)
+    assert loop.metadata["looped"] and loop.metadata["cycles"] == 2
+    # The wrap-around is as smooth as the inside of the clip.
+    assert err["ratio"] < 1.0
+    assert err["seam_step_m"] <= err["interior_step_p99_m"]
+    # Without the correction the seam of the same trimmed clip is worse.
+    raw = to_treadmill(trim_cycles(read_bvh(path), 1)).slice(0, None)
+    raw = raw.slice(0, raw.n_frames - 1)
+    raw.metadata["looped"] = True
+    assert seam_error(raw)["seam_accel_m"] > err["seam_accel_m"]
