@@ -89,12 +89,14 @@ def evaluate(phenotypes: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     }
     with torch.no_grad():
         rest = m(phenotype_kwargs=kwargs)
-        measure = _anthropometry()(rest["rest_vertices"])
+        vertices = rest["rest_vertices"]
+        anthro = _anthropometry()
+        # Anny's own definitions, each computed once (its __call__ recomputes the volume three times).
+        measured = {"height": anthro.height(vertices), "volume": anthro.volume(vertices),
+                    "waist": anthro.waist_circumference(vertices)}
     keep = ("rest_vertices", "rest_bone_heads", "rest_bone_poses")
     out = {k: rest[k].cpu().numpy() for k in keep}
-    out["height"] = measure["height"].cpu().numpy()
-    out["volume"] = measure["volume"].cpu().numpy()
-    out["waist"] = measure["waist_circumference"].cpu().numpy()
+    out.update({k: v.cpu().numpy() for k, v in measured.items()})
     return out
 
 
