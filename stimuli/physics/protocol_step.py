@@ -22,7 +22,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-4"
+CODE_VERSION = "physics-5"
 
 
 def cache_dir() -> Path:
@@ -90,7 +90,9 @@ def _job(args: dict) -> dict:
         curves = gait_curves(result.sim, result.ragdoll, int(motion.metadata.get("cycles", 2)),
                              reference_heel_strike_s(motion))
         report["fig7"] = curves
-        report["knee_flexion_peak_deg"] = curves["knee_flexion_peak_deg"]
+        for key in ("knee_flexion_peak_deg", "knee_flexion_stance_peak_deg", "knee_extension_moment_peak_nm_per_kg",
+                    "root_com_excursion_cm"):
+            report[key] = curves[key]
         result.motion.metadata.update(actor=args["actor"], gait=args["gait"])
         result.motion.save(args["out_motion"])
     Path(args["out_report"]).write_text(json.dumps(report, indent=1, sort_keys=True))
@@ -164,7 +166,12 @@ def _summary(reports: list[dict], path: Path) -> None:
     rows = [{"actor": r["actor"], "gait": r["gait"], "sex": r["body"]["sex"], "height_m": r["body"]["height_m"],
              "weight_kg": r["body"]["weight_kg"], "bmi": r["body"]["bmi"],
              "reference_weight_kg": r["reference_body"]["weight_kg"], "b_mm": round(r["b_m"] * 1000, 4),
+             "b_paper_mm": round(r["b_paper_m"] * 1000, 3),
              "tracking_rms_deg": r["tracking_rms_deg_overall"], "nocom_rms_deg": r.get("nocom_rms_deg_mean"),
-             "knee_flexion_peak_deg": r.get("knee_flexion_peak_deg"), "fell": r["fell"],
+             "knee_flexion_peak_deg": r.get("knee_flexion_peak_deg"),
+             "knee_flexion_stance_peak_deg": r.get("knee_flexion_stance_peak_deg"),
+             "knee_extension_moment_peak_nm_per_kg": r.get("knee_extension_moment_peak_nm_per_kg"),
+             "root_com_excursion_cm": r.get("root_com_excursion_cm"),
+             "root_drift_vertical_max_m": r["root_drift"]["vertical_max_m"], "fell": r["fell"],
              "wall_per_simulated": r["wall_per_simulated"]} for r in reports]
     pd.DataFrame(rows).sort_values(["gait", "sex", "actor"]).to_csv(path, index=False)

@@ -123,10 +123,21 @@ def capsule_radius(volume: float, length: float) -> float:
     return float(max(r.real for r in roots if abs(r.imag) < 1e-9 and r.real > 0))
 
 
-def _foot_box(body, ankle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and half sizes of the box around the mesh vertices below the ankle (sole on y = 0)."""
+def _foot_box(body, ankle: np.ndarray, ball: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half sizes of the box around the mesh vertices below the ankle (sole on y = 0).
+
+    The box ends at the ball of the foot (the toe joint, the foot segment's distal end): the
+    motion's toes bend at push-off while the ragdoll foot is rigid, so a box reaching the toe tips
+    would dig ~6 cm into the floor whenever the heel rises, and the contact would throw the body
+    up (the pelvis bounced ±8 cm).
+    """
     v = body.vertices
+    forward = np.asarray(ball - ankle, float)
+    forward[1] = 0.0
+    forward /= np.linalg.norm(forward)
+    reach = float((ball - ankle) @ forward)
     near = (v[:, 1] < ankle[1]) & (np.abs(v[:, 0] - ankle[0]) < 0.12) & (np.abs(v[:, 2] - ankle[2]) < 0.35)
+    near &= (v - ankle) @ forward <= reach
     lo, hi = v[near].min(0), v[near].max(0)
     lo[1] = 0.0
     hi[1] = ankle[1]
@@ -153,7 +164,7 @@ def _shape(label: str, seg, body, anchor: np.ndarray, rig) -> tuple[dict, np.nda
         centre = seg.com_geometric - anchor
         return {"type": "sphere", "size": [radius], "pos": centre}, inertia.sphere_inertia(1.0, radius), np.array([1.0, 0, 0, 0]), radius
     if name == "foot":
-        centre, half = _foot_box(body, anchor)
+        centre, half = _foot_box(body, anchor, np.asarray(seg.distal, float))
         return ({"type": "box", "size": half, "pos": centre - anchor}, inertia.box_inertia(1.0, half),
                 np.array([1.0, 0, 0, 0]), float(half[0]))
     if name == "pelvis":

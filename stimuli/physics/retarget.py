@@ -86,6 +86,7 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
     report = {
         "body": _body_row(body, weight_kg), "reference_body": _body_row(reference_body, ref_w),
         "b_m": inertia.balance_factor(ref_masses, masses, reference_body.rig.rest_heads[0], body.rig.rest_heads[0]),
+        "b_paper_m": inertia.paper_balance_factor(body.segments, weight_kg),
         "com_m": np.round(inertia.whole_body_com(masses), 5).tolist(),
         "reference_com_m": np.round(inertia.whole_body_com(ref_masses), 5).tolist(),
         "segments": [m.as_row() for m in masses],
