@@ -15,7 +15,7 @@ import numpy as np
 
 from stimuli.render.camera import orbit_view
 from stimuli.render.labels import LabelOverlay
-from stimuli.render.scene import Stage, grey_material, hex_colour
+from stimuli.render.scene import Stage, grey_material, hex_colour, over
 
 LAYOUTS = ("treadmill", "side_by_side", "row", "point_light")
 SKIN_CHUNK = 32
@@ -115,33 +115,36 @@ def render_frames(look: Look, figures: list[Figure]):
     dots = look.layout == "point_light"
     stage = Stage(view, hex_colour(look.background), lit=not dots)
     roots = [centred_root(f) for f in figures]
+    treadmills, floor = [], None
+    if not dots:
+        from stimuli.render.treadmill import DECK_HEIGHT_M
+
+        floor = stage.add_checker_floor(np.zeros(3), -DECK_HEIGHT_M)
+        treadmills = [Treadmill(stage, p, f.belt_speed_mps, belt_period(f.belt_speed_mps, look.duration_s, look.fps))
+                      for f, p in zip(figures, poses)]
+    # The background (sky, floor, treadmills) is drawn once; per frame only the region holding
+    # what moves is drawn — without the floor, which nothing can hide behind — and composited.
+    background = stage.render()
+    if floor is not None:
+        stage.scene.remove_node(floor)
+    stage.make_transparent()
     if dots:
         animated = [DotFigure(stage, apply_pose(p, marker_positions(f.body, f.rotations, r)))
                     for f, r, p in zip(figures, roots, poses)]
-        treadmills = []
     else:
-        from stimuli.render.treadmill import DECK_HEIGHT_M
-
-        stage.add_checker_floor(np.zeros(3), -DECK_HEIGHT_M)
-        treadmills = [Treadmill(stage, p, f.belt_speed_mps, belt_period(f.belt_speed_mps, look.duration_s, look.fps))
-                      for f, p in zip(figures, poses)]
         animated = [_SkinnedFigure(stage, f, r, p) for f, r, p in zip(figures, roots, poses)]
-    region = dynamic_region(view, figures, roots, poses, treadmills, dots)
+    x0, y0, x1, y1 = region = dynamic_region(view, figures, roots, poses, treadmills, dots)
     offsets = [p[:3, 3] for p in poses]
-    overlay = LabelOverlay(view, [f.label for f in figures], offsets, look.background) if any(f.label for f in figures) else None
-    background = None
-    x0, y0, x1, y1 = region
+    labels = [f.label for f in figures]
+    overlay = LabelOverlay(view, labels, offsets, look.background) if any(labels) else None
+    under = background[y0:y1, x0:x1]
     for i in range(n):
         for a in animated:
             a.set_frame(i)
         for t in treadmills:
             t.set_time(i / look.fps)
-        if background is None:  # everything outside the region is the same in every frame
-            background = stage.render()
-        # Every frame, the first included, takes its region from a region render: a full render
-        # can differ from it in a few edge pixels, which would flicker once per loop.
         frame = background.copy()
-        frame[y0:y1, x0:x1] = stage.render(region)
+        frame[y0:y1, x0:x1] = over(stage.render(region, rgba=True), under)
         yield overlay.apply(frame) if overlay else frame
 
 

@@ -88,8 +88,9 @@ def _install_fast_paths(offscreen) -> None:
         GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, inner._main_fb)
         GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
         GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb)
-        data = GL.glReadPixels(0, 0, width, height, GL.GL_RGB, GL.GL_UNSIGNED_BYTE)
-        colour = np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
+        rgba = bool(flags & pyrender_module().RenderFlags.RGBA)
+        data = GL.glReadPixels(0, 0, width, height, GL.GL_RGBA if rgba else GL.GL_RGB, GL.GL_UNSIGNED_BYTE)
+        colour = np.frombuffer(data, dtype=np.uint8).reshape(height, width, 4 if rgba else 3)
         return colour[::-1], None
 
     inner._read_main_framebuffer = read_colour

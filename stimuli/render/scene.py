@@ -72,9 +72,11 @@ def checker_floor_mesh(centre, y: float, square: float = CHECKER_M, half: float 
     faces = np.concatenate([faces, far_f + len(vertices)]).astype(np.uint32)
     vertices = np.concatenate([vertices, far_v.astype(np.float32)])
     colours = np.concatenate([colours, np.tile([*mid, 1.0], (4, 1)).astype(np.float32)])
+    # emissive_factor > 0 marks an unlit surface for shaders/mesh.frag: the colours are final.
+    unlit = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
+                                               roughnessFactor=1.0, emissiveFactor=(1.0, 1.0, 1.0))
     prim = pyrender.Primitive(positions=vertices, normals=_flat_up_normals(vertices), color_0=colours,
-                              indices=faces, material=grey_material((1.0, 1.0, 1.0), roughness=1.0),
-                              mode=pyrender.GLTF.TRIANGLES)
+                              indices=faces, material=unlit, mode=pyrender.GLTF.TRIANGLES)
     return pyrender.Mesh([prim])
 
 
@@ -133,19 +135,37 @@ class Stage:
         """Add a mesh (pyrender.Mesh) and return its node (move it later with ``set_pose``)."""
         return self.scene.add(mesh, pose=np.eye(4) if pose is None else pose)
 
-    def add_checker_floor(self, centre, y: float) -> None:
-        """The checkerboard ground plane, squares of ``CHECKER_M``, aligned to world x/z."""
-        self.add(checker_floor_mesh(centre, y))
+    def add_checker_floor(self, centre, y: float):
+        """The checkerboard ground plane, squares of ``CHECKER_M``, aligned to world x/z; returns its node."""
+        return self.add(checker_floor_mesh(centre, y))
 
-    def render(self, region: tuple[int, int, int, int] | None = None) -> np.ndarray:
-        """The frame, or only the pixels ``region = (x0, y0, x1, y1)`` of it, as uint8 RGB.
+    def render(self, region: tuple[int, int, int, int] | None = None, rgba: bool = False) -> np.ndarray:
+        """The frame, or only the pixels ``region = (x0, y0, x1, y1)`` of it, as uint8 RGB(A).
 
         Rendering a region shifts the principal point so that its pixels are exactly those of
-        the full image (4× multisampled either way); pasting it into a full render is seamless.
+        the full image (4× multisampled either way). With ``rgba`` and a transparent background
+        the colour is premultiplied by coverage, ready for :func:`over`.
         """
+        pyrender = pyrender_module()
         x0, y0, x1, y1 = region or (0, 0, self.view.width, self.view.height)
         self.camera.cx = self.view.width / 2 - x0
         self.camera.cy = self.view.height / 2 - y0
         r = renderer(x1 - x0, y1 - y0)
-        colour, _ = r.render(self.scene, flags=self.flags)
-        return colour[..., :3]
+        colour, _ = r.render(self.scene, flags=self.flags | (pyrender.RenderFlags.RGBA if rgba else 0))
+        return colour
+
+    def make_transparent(self) -> None:
+        """Clear to transparent black from now on (for layers composited over a background)."""
+        self.scene.bg_color = np.zeros(4)
+
+
+def over(premultiplied: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Composite a premultiplied RGBA layer (uint8) over an RGB background (uint8).
+
+    >>> import numpy as np
+    >>> over(np.array([[[100, 0, 0, 128]]], np.uint8), np.array([[[0, 0, 254]]], np.uint8)).tolist()
+    [[[100, 0, 127]]]
+    """
+    alpha = premultiplied[..., 3:4].astype(np.uint16)
+    out = premultiplied[..., :3].astype(np.uint16) + (background.astype(np.uint16) * (255 - alpha) + 127) // 255
+    return np.minimum(out, 255).astype(np.uint8)

@@ -48,6 +48,10 @@ void main()
 #ifdef COLOR_0_LOC
     base *= color_multiplier;
 #endif
+    if (material.emissive_factor.r > 0.0) {
+        frag_color = base;  // unlit surface (the floor): its colours are final display colours
+        return;
+    }
     vec3 v = normalize(cam_pos - frag_position);
 #ifdef NORMAL_LOC
     vec3 n = normalize(frag_normal);
@@ -60,12 +64,15 @@ void main()
     vec3 light = ambient_light;
     float highlight = 0.0;
     float shine = 1.0 - material.roughness_factor;
-    for (int i = 0; i < n_directional_lights; i++) {
+    // A compile-time bound lets the shader compiler unroll the loop (much faster on llvmpipe);
+    // the scene always has exactly MAX_DIRECTIONAL_LIGHTS directional lights.
+    for (int i = 0; i < MAX_DIRECTIONAL_LIGHTS; i++) {
         vec3 l = -directional_lights[i].direction;
-        float wrapped = max((dot(n, l) + 0.25) / 1.25, 0.0);  // soft terminator: "soft" lights
+        float wrapped = max((dot(n, l) + 0.25) * 0.8, 0.0);  // soft terminator: "soft" lights
         light += directional_lights[i].color * directional_lights[i].intensity * wrapped;
-        vec3 h = normalize(l + v);
-        highlight += directional_lights[i].intensity * shine * 0.25 * pow(max(dot(n, h), 0.0), 32.0);
+        float s = max(dot(n, normalize(l + v)), 0.0);
+        s *= s; s *= s; s *= s; s *= s; s *= s;            // s^32 without pow()
+        highlight += directional_lights[i].intensity * shine * 0.25 * s;
     }
     frag_color = vec4(clamp(base.rgb * light + vec3(highlight), 0.0, 1.0), base.a);
 }
