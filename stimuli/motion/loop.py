@@ -77,10 +77,14 @@ def trim_cycles(motion: Motion, cycles: int | None = None) -> Motion:
     return out
 
 
-def _hermite(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Hermite basis h01 (position) and h11 (end tangent) on s = 0…1 over ``n`` frames."""
+def _hermite(n: int, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Hermite basis over ``n`` frames: h01 (position, spread over the clip) and h11 (end tangent,
+    in frames, confined to the last ``window`` frames so a velocity mismatch is fixed locally)."""
     s = np.linspace(0.0, 1.0, n)
-    return -2 * s**3 + 3 * s**2, s**3 - s**2
+    h01 = -2 * s**3 + 3 * s**2
+    u = np.clip((np.arange(n) - (n - 1 - window)) / window, 0.0, 1.0)
+    h11 = (u**3 - u**2) * window
+    return h01, h11
 
 
 def close_loop(motion: Motion) -> Motion:
@@ -88,18 +92,26 @@ def close_loop(motion: Motion) -> Motion:
     t = motion.n_frames
     if t < 4:
         raise StimuliError("motion: a loop needs at least 4 frames")
-    h01, h11 = _hermite(t)
-    span = t - 1
-    # Root translation: position and velocity mismatch at the ends.
+    window = int(np.clip(round(0.2 * motion.fps), 3, max((t - 1) // 2, 3)))
+    h01, h11 = _hermite(t, window)
+    span = 1
+    # Velocities at the seam from each side, by second-order one-sided differences: for a smooth
+    # periodic motion both estimate the same velocity (first differences would differ by one
+    # frame of acceleration, which the correction would then amplify over the whole clip).
     x = motion.root_translation
     dx = x[0] - x[-1]
-    dv = (x[1] - x[0]) - (x[-1] - x[-2])
-    root = x + h01[:, None] * dx + h11[:, None] * span * dv
+    v0 = (-3 * x[0] + 4 * x[1] - x[2]) / 2
+    vt = (3 * x[-1] - 4 * x[-2] + x[-3]) / 2
+    root = x + h01[:, None] * dx + h11[:, None] * span * (v0 - vt)
     # Rotations: the same correction in the tangent space (rotation vectors) of each joint.
     q = quat.unroll(motion.rotations)
-    d = quat.to_axis_angle(quat.mul(quat.inv(q[-1]), q[0]))
-    w0 = quat.to_axis_angle(quat.mul(quat.inv(q[0]), q[1]))
-    wt = quat.to_axis_angle(quat.mul(quat.inv(q[-2]), q[-1]))
+
+    def log(a, b):
+        return quat.to_axis_angle(quat.mul(quat.inv(a), b))
+
+    d = log(q[-1], q[0])
+    w0 = (4 * log(q[0], q[1]) - log(q[0], q[2])) / 2
+    wt = (-4 * log(q[-1], q[-2]) + log(q[-1], q[-3])) / 2
     corr = h01[:, None, None] * d + h11[:, None, None] * span * (w0 - wt)
     rot = quat.mul(q, quat.from_axis_angle(corr))
     closed = motion.replace(rotations=rot[:-1], root_translation=root[:-1])

@@ -1,0 +1,99 @@
+"""Average motion of several actors: DTW alignment of gait cycles and quaternion averaging.
+
+Each input is reduced to one gait cycle (its first whole cycle), described per frame by its joint
+positions relative to the pelvis, divided by the skeleton's height (so tall and short actors
+compare). The medoid cycle (smallest summed DTW distance to the others, ``dtaidistance``) is the
+time reference; every cycle is aligned to it along its DTW warping path, and per reference frame
+the matched local rotations are averaged with the sign-invariant quaternion mean (never Euler
+angles), the root heights and offsets arithmetically. The averaged cycle is looped (it is
+periodic by construction up to the seam correction) and repeated to the requested cycles. This is
+the NoCOM condition of Exp 2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stimuli.errors import StimuliError
+from stimuli.motion import quat
+from stimuli.motion.loop import close_loop, repeat
+from stimuli.motion.motion import Motion
+from stimuli.motion.skeleton import role_indices
+
+
+def cycle_of(motion: Motion) -> Motion:
+    """One gait cycle (frames of the first whole cycle, end frame included for looping)."""
+    from stimuli.motion.events import cycle_starts
+    if motion.metadata.get("looped"):
+        cycles = int(motion.metadata.get("cycles", 1))
+        n = motion.n_frames // max(cycles, 1)
+        rot = np.concatenate([motion.rotations[:n], motion.rotations[n:n + 1] if motion.n_frames > n else motion.rotations[:1]])
+        root = np.concatenate([motion.root_translation[:n], motion.root_translation[n:n + 1] if motion.n_frames > n else motion.root_translation[:1]])
+        return motion.replace(rotations=rot, root_translation=root)
+    hs = cycle_starts(motion)
+    return motion.slice(int(hs[0]), int(hs[1]) + 1)
+
+
+def features(motion: Motion) -> np.ndarray:
+    """Per-frame features for DTW: joint positions relative to the pelvis over stature (T×3K)."""
+    roles = role_indices(motion)
+    keys = [r for r in sorted(roles) if r != "pelvis"]
+    pos = motion.positions()
+    rel = pos[:, [roles[k] for k in keys]] - pos[:, [roles["pelvis"]]]
+    stature = float(np.ptp(motion.rest_positions()[:, 1])) or 1.0
+    return (rel / stature).reshape(len(pos), -1)
+
+
+def dtw_distance(a: Motion, b: Motion) -> float:
+    """DTW distance between the pelvis-relative, height-normalised poses of two motions."""
+    from dtaidistance import dtw_ndim
+    return float(dtw_ndim.distance(features(a).astype(np.double), features(b).astype(np.double)))
+
+
+def _path(ref: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
+    from dtaidistance import dtw_ndim
+    return dtw_ndim.warping_path(ref.astype(np.double), other.astype(np.double))
+
+
+def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = None) -> Motion:
+    """DTW-aligned average of several motions on the same skeleton (joint names)."""
+    if len(motions) < 2:
+        raise StimuliError(f"average: needs at least 2 motions, got {len(motions)}")
+    names = motions[0].joint_names
+    for i, m in enumerate(motions[1:], 1):
+        if m.joint_names != names:
+            raise StimuliError(f"average: motion {i + 1} has another skeleton than motion 1 "
+                               "(retarget them to one rig first)")
+    fps = fps or motions[0].fps
+    cyc = [cycle_of(m if m.fps == fps else m.resample(fps)) for m in motions]
+    feats = [features(c) for c in cyc]
+    dist = np.array([[dtw_distance(a, b) if i < j else 0.0 for j, b in enumerate(cyc)] for i, a in enumerate(cyc)])
+    dist = dist + dist.T
+    ref = int(np.argmin(dist.sum(axis=1)))
+    n = cyc[ref].n_frames
+    rots = [[] for _ in range(n)]
+    roots = [[] for _ in range(n)]
+    for c, f in zip(cyc, feats):
+        per_frame: dict[int, list[int]] = {}
+        for i, j in _path(feats[ref], f):
+            per_frame.setdefault(i, []).append(j)
+        for i in range(n):
+            js = per_frame.get(i, [i])
+            rots[i].append(quat.mean(c.rotations[js]))
+            roots[i].append(c.root_translation[js].mean(axis=0))
+    rot = np.stack([quat.mean(np.stack(r)) for r in rots])
+    root = np.stack([np.mean(r, axis=0) for r in roots])
+    offsets = np.mean([c.offsets for c in cyc], axis=0)
+    meta = {"source": "average", "n_motions": len(motions), "reference": ref,
+            "dtw_distances": dist.round(6).tolist(), "treadmill": True,
+            "belt_speed_mps": float(np.mean([m.metadata.get("belt_speed_mps", 0.0) for m in motions])),
+            "speed_mps": float(np.mean([m.metadata.get("speed_mps", m.metadata.get("belt_speed_mps", 0.0)) for m in motions])),
+            "gait": motions[0].metadata.get("gait"), "roles": motions[0].metadata.get("roles"),
+            "naming": motions[0].metadata.get("naming")}
+    avg = Motion(fps, names, motions[0].parents, offsets, quat.unroll(rot), root, meta)
+    # Averages of looped clips are periodic already: drop the end frame; otherwise close the loop.
+    periodic = all(m.metadata.get("looped") for m in motions)
+    looped = avg.slice(0, avg.n_frames - 1) if periodic else close_loop(avg)
+    looped.metadata["looped"] = True
+    looped.metadata.update(cycles=1, cadence_spm=120.0 * fps / (n - 1))
+    return repeat(looped, cycles)

@@ -1,0 +1,167 @@
+"""Generator, per-actor styles, thesis modifier, DTW average and metrics (stimuli.motion)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stimuli.errors import StimuliError
+from stimuli.motion import quat
+from stimuli.motion.average import average_motion, cycle_of, dtw_distance
+from stimuli.motion.bvh import read_bvh
+from stimuli.motion.generate import GaitParams, generate
+from stimuli.motion.loop import seam_error, trim_cycles
+from stimuli.motion.metrics import gait_metrics, knee_angles, plausibility_from_joints
+from stimuli.motion.modifier import modify, thesis_parameters
+from stimuli.motion.style import params_for_actor
+
+ROOT = Path(__file__).resolve().parents[1]
+# Table 2 of Vyas et al. 2023 (protocols/exp1_shape_motion.yaml).
+ACTORS = [("F_Hi1", 1.60, 28.1, "F"), ("F_Hi2", 1.64, 25.3, "F"), ("F_Lo1", 1.60, 24.8, "F"),
+          ("F_Lo2", 1.60, 19.5, "F"), ("M_Hi1", 1.79, 32.1, "M"), ("M_Hi2", 1.83, 35.8, "M"),
+          ("M_Lo1", 1.81, 22.7, "M"), ("M_Lo2", 1.82, 21.7, "M")]
+GAITS = {"walk": (112, 1.2), "jog": (138, 2.2)}
+
+
+def actor_motion(actor, gait, seed=1):
+    cad, speed = GAITS[gait]
+    return generate(params_for_actor(*actor, gait, cad, speed, seed=seed), actor[1])
+
+
+@pytest.fixture(scope="module")
+def motions():
+    return {(a[0], g): actor_motion(a, g) for a in ACTORS for g in GAITS}
+
+
+# ---------------------------------------------------------------- acceptance figures
+@pytest.mark.parametrize("gait", list(GAITS))
+def test_cadence_within_one_step_per_minute(motions, gait):
+    for a in ACTORS:
+        got = gait_metrics(motions[(a[0], gait)])["cadence_spm"]
+        assert abs(got - GAITS[gait][0]) <= 1.0, (a[0], gait, got)
+
+
+def test_all_actors_are_physically_plausible(motions):
+    for key, m in motions.items():
+        q = plausibility_from_joints(m)
+        assert q["skate_pct"] <= 5.0, (key, q)
+        assert q["penetrate_cm"] <= 1.0 and q["float_cm"] <= 1.0, (key, q)
+
+
+def test_walk_has_double_support_and_jog_has_flight(motions):
+    for a in ACTORS:
+        w, j = gait_metrics(motions[(a[0], "walk")]), gait_metrics(motions[(a[0], "jog")])
+        assert w["double_support_pct"] > 10.0 and w["flight_pct"] == 0.0
+        assert j["flight_pct"] > 5.0 and j["double_support_pct"] == 0.0
+        assert 55 < w["stance_pct"] < 70 and 30 < j["stance_pct"] < 50
+        # Jogging bends the knees more than walking (Novacheck 1998).
+        assert j["knee_flexion_max_deg"] > w["knee_flexion_max_deg"] + 10
+
+
+def test_generated_walk_is_stable_most_of_the_time(motions):
+    unstable = [plausibility_from_joints(motions[(a[0], "walk")])["dynamically_unstable_pct"] for a in ACTORS]
+    # HUMOS reports 28.1 % unstable frames for its own motions.
+    assert np.mean(unstable) < 40.0
+
+
+def test_generated_clips_loop_seamlessly(motions):
+    for m in motions.values():
+        assert seam_error(m)["ratio"] < 1.5
+
+
+def test_actors_move_differently_and_the_average_lies_between(motions):
+    cmu = read_bvh(ROOT / "stimuli" / "data" / "cmu_35_01_walk.bvh").resample(30)
+    c1, c2 = trim_cycles(cmu, 1), trim_cycles(cmu.slice(int(cmu.n_frames * 0.35)), 1)
+    within = dtw_distance(c1, c2)  # stride-to-stride variability of one real walker
+    for sex in "FM":
+        ms = [motions[(a[0], "walk")] for a in ACTORS if a[3] == sex]
+        between = [dtw_distance(cycle_of(a), cycle_of(b)) for i, a in enumerate(ms) for b in ms[i + 1:]]
+        assert min(between) > within, (sex, between, within)
+        avg = average_motion(ms)
+        to_avg = [dtw_distance(cycle_of(avg), cycle_of(m)) for m in ms]
+        assert max(to_avg) < np.mean(between), (to_avg, between)
+
+
+def test_higher_bmi_walks_wider_with_less_knee_flexion():
+    lean = params_for_actor("x", 1.80, 20.0, "M", "walk", 112, 1.2, style=False)
+    heavy = params_for_actor("x", 1.80, 36.0, "M", "walk", 112, 1.2, style=False)
+    assert heavy.walking_base_m > lean.walking_base_m
+    assert heavy.knee_flexion_scale < lean.knee_flexion_scale
+    assert heavy.arm_abduction_deg > lean.arm_abduction_deg
+    assert heavy.stance_fraction > lean.stance_fraction
+    free = params_for_actor("x", 1.80, 36.0, "M", "walk", 112, None, style=False)
+    assert free.speed_mps < params_for_actor("x", 1.80, 20.0, "M", "walk", 112, None, style=False).speed_mps
+
+
+def test_style_is_deterministic_per_actor():
+    a = params_for_actor("F_Hi1", 1.6, 28.1, "F", "walk", 112, 1.2, seed=3)
+    b = params_for_actor("F_Hi1", 1.6, 28.1, "F", "walk", 112, 1.2, seed=3)
+    c = params_for_actor("F_Hi1", 1.6, 28.1, "F", "walk", 112, 1.2, seed=4)
+    assert a == b and a != c
+
+
+def test_generator_rejects_bad_parameters():
+    with pytest.raises(StimuliError, match="gait must be one of"):
+        generate(GaitParams(gait="skip"))
+    with pytest.raises(StimuliError, match="cadence_spm"):
+        generate(GaitParams(cadence_spm=5))
+
+
+def test_generated_step_length_matches_speed_and_cadence():
+    m = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), 1.75)
+    g = gait_metrics(m)
+    assert g["step_length_m"] == pytest.approx(1.2 * 60 / g["cadence_spm"], rel=1e-6)
+    assert 0.05 < g["walking_base_m"] < 0.16
+
+
+# ---------------------------------------------------------------- thesis modifier
+def test_thesis_worked_example_to_1e5():
+    p = thesis_parameters(1.83, 34.1)
+    expected = {"t": 0.960870, "wthr": 0.945304, "chest_m": 1.133739, "speed_ratio": 1.077012,
+                "abduction_offset_deg": 6.14649, "base_cm": 85.9973, "bob_ratio": 1.108682,
+                "swing_ratio": 1.286497, "height_scale": 1.040956}
+    for k, v in expected.items():
+        assert abs(p[k] - v) <= 1e-5 + 5e-6 * (k == "base_cm") * 10, (k, p[k], v)
+
+
+def test_thesis_identity_for_the_base_actor():
+    m = generate(GaitParams(gait="walk"), 1.758)
+    out = modify(m, 1.758, 12.1, chest_m=0.98, wthr=0.83)
+    assert out.n_frames == m.n_frames
+    assert np.max(quat.angle(quat.mul(quat.inv(out.rotations), m.rotations))) < 1e-6
+    assert np.allclose(out.root_translation, m.root_translation, atol=1e-9)
+
+
+def test_thesis_modifier_effects_on_a_walk():
+    m = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), 1.758)
+    out = modify(m, 1.83, 34.1, base_scale=0.1)
+    p = out.metadata["modifier"]
+    assert out.metadata["cadence_spm"] == pytest.approx(m.metadata["cadence_spm"] * p["speed_ratio"])
+    assert out.metadata["speed_mps"] == pytest.approx(1.2 * p["speed_ratio"])
+
+    def arm_range(mm, axis):
+        j = mm.index("l_shoulder")
+        d = quat.rotate(mm.rotations[:, j], np.array([0.0, -1.0, 0.0]))
+        return np.degrees(np.arctan2(d[:, axis], -d[:, 1]))
+
+    assert np.ptp(arm_range(out, 2)) / np.ptp(arm_range(m, 2)) == pytest.approx(p["swing_ratio"], rel=0.03)
+    assert np.mean(arm_range(out, 0)) - np.mean(arm_range(m, 0)) == pytest.approx(p["abduction_offset_deg"], abs=0.5)
+    # Feet 10 % of the thesis offset wider per foot (≈ 3.1 cm), body scaled by H/1.758.
+    pos0, pos1 = m.positions(), out.positions()
+    w0 = np.mean(pos0[:, m.index("l_ankle"), 0] - pos0[:, m.index("r_ankle"), 0]) * p["height_scale"]
+    w1 = np.mean(pos1[:, m.index("l_ankle"), 0] - pos1[:, m.index("r_ankle"), 0])
+    assert w1 - w0 == pytest.approx(2 * p["base_offset_cm"] / 1000, abs=0.01)
+
+
+def test_knee_angles_in_the_rest_pose_and_bent():
+    m = generate(GaitParams(gait="walk"), 1.75)
+    m.rotations[:] = quat.IDENTITY
+    rest = m.rest_positions()
+    thigh = rest[m.index("l_knee")] - rest[m.index("l_hip")]
+    shank = rest[m.index("l_ankle")] - rest[m.index("l_knee")]
+    expected = np.degrees(np.arccos(thigh @ shank / np.linalg.norm(thigh) / np.linalg.norm(shank)))
+    assert np.allclose(knee_angles(m)["l"], expected, atol=1e-6)
+    m.rotations[:, m.index("l_knee")] = quat.from_axis_angle(np.array([np.radians(40.0), 0, 0]))
+    assert np.allclose(knee_angles(m)["l"], 40.0 + expected, atol=0.2)
