@@ -102,7 +102,7 @@ def test_missing_motion_sources_are_named_not_faked(short_protocol, tmp_path, ru
     code, out, err = run_cli("render", short_protocol("exp2_com_vs_average"), "--out", tmp_path / "x",
                              "--limit", "1", "--resolution", "160x90", "--no-progress")
     assert code == 2
-    assert "could not be rendered" in err and "average motion" in err
+    assert "could not be rendered" in err and "physics protocol" in err
     assert not list((tmp_path / "x").glob("clips/*.mp4"))
 
 
@@ -142,3 +142,18 @@ def test_ctrl_c_leaves_no_half_files_and_the_rerun_resumes(short_protocol, tmp_p
     report = render_protocol(path, out, limit=6, resolution="320x180", fps=15, workers=1, progress=False,
                              source="procedural")
     assert report.skipped == finished and len(report.rendered) == 6 - len(finished)
+
+
+@pytest.mark.slow
+def test_exp1_end_to_end_with_real_motions(short_protocol, tmp_path):
+    """Exp 1 from the protocol's own motions (generator → retarget onto each body) once they exist."""
+    pytest.importorskip("stimuli.motion.retarget", reason="motion retargeting onto the Anny rig not available yet")
+    from stimuli.render.video import read_video
+
+    out = tmp_path / "exp1"
+    report = _render(short_protocol("exp1_shape_motion"), out, only="M-jog-Hi2-Lo1", source="protocol",
+                     resolution="320x180", fps=15)
+    assert report.rendered == ["M-jog-Hi2-Lo1"]
+    frames, _ = read_video(out / _manifest(out)[0]["file"])
+    body = (np.abs(frames.astype(int) - 158).max(axis=-1) < 40).sum(axis=(1, 2))
+    assert body.min() > 500 and np.abs(np.diff(frames.astype(int), axis=0)).mean() > 0.1

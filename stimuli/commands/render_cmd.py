@@ -22,6 +22,8 @@ def register(subparsers) -> None:
     p.add_argument("--poses", choices=["protocol", "procedural"], default="protocol",
                    help="'procedural': real bodies with a simple stepping pose (checks layout and framing "
                         "before motions exist)")
+    p.add_argument("--motions", type=Path, default=None,
+                   help="folder written by 'shapemotion physics protocol' (Exp 2's NoCOM and COM motions)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verify", action="store_true", help="only re-hash the clips of an existing manifest")
     p.set_defaults(func=run_render)
@@ -59,7 +61,7 @@ def run_render(args: argparse.Namespace) -> int:
         return 0
     report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps, limit=args.limit,
                              only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
-                             source=args.poses)
+                             source=args.poses, motions_dir=args.motions)
     print(report.summary())
     return 0
 

@@ -77,16 +77,19 @@ def is_current(job: Job, row: dict | None) -> bool:
         and sha256_file(job.clip) == row.get("sha256")
 
 
-def render_job(protocol, job: Job, source: str = "protocol") -> dict:
+def render_job(protocol, job: Job, source: str = "protocol", motions_dir=None) -> dict:
     """Render one clip (any process); returns its manifest row."""
     from stimuli.render.clip import render_frames
     from stimuli.render.video import write_video
 
     if source == "procedural":
-        from stimuli.render.procedural import procedural_figures as figures_for
+        from stimuli.render.procedural import procedural_figures
+
+        figures = procedural_figures(protocol, job.stimulus, job.look)
     else:
-        from stimuli.render.sources import protocol_figures as figures_for
-    figures = figures_for(protocol, job.stimulus, job.look)
+        from stimuli.render.sources import protocol_figures
+
+        figures = protocol_figures(protocol, job.stimulus, job.look, motions_dir)
     look = job.look
     info = write_video(render_frames(look, figures), job.clip, look.fps, look.width, look.height, look.n_frames,
                        poster=job.poster)
@@ -94,20 +97,21 @@ def render_job(protocol, job: Job, source: str = "protocol") -> dict:
 
 
 def _worker_job(args):
-    protocol, job, source = args
+    protocol, job, source, motions_dir = args
     try:
-        return job.stimulus.stimulus_id, render_job(protocol, job, source), None
+        return job.stimulus.stimulus_id, render_job(protocol, job, source, motions_dir), None
     except StimuliError as exc:  # a missing motion source: report it, keep rendering the rest
         return job.stimulus.stimulus_id, None, str(exc)
 
 
 def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=None, only=None, workers=None,
                     quick: bool = False, progress: bool = True, source: str = "protocol", strict: bool = True,
-                    sheet: bool = True) -> RenderReport:
+                    sheet: bool = True, motions_dir=None) -> RenderReport:
     """Render every test, practice and familiarization stimulus of a protocol's design.
 
     ``strict``: raise StimuliError after rendering what can be rendered when some stimuli could
     not be (their motion source is missing); otherwise only report them in the result.
+    ``motions_dir``: the folder of ``shapemotion physics protocol`` (Exp 2's NoCOM/COM motions).
     """
     from stimuli.design import build_design
     from stimuli.protocol import load_protocol
@@ -132,7 +136,7 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     out_dir.mkdir(parents=True, exist_ok=True)
     report.manifest = write_manifest(out_dir, _ordered(rows, order))
     workers = max(1, min(workers or min(2, os.cpu_count() or 1), len(todo) or 1))
-    for sid, row, error in _run(protocol, todo, source, workers, progress, protocol.name):
+    for sid, row, error in _run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
         if row is not None:
             rows[sid] = row
             report.rendered.append(sid)
@@ -157,7 +161,7 @@ def _ordered(rows: dict, order: list[str]) -> list[dict]:
     return [rows[sid] for sid in _ordered_ids(rows, order)]
 
 
-def _run(protocol, jobs: list[Job], source: str, workers: int, progress: bool, name: str):
+def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool, name: str):
     """Yield (stimulus_id, row or None, error or None) as clips finish; Ctrl-C stops cleanly."""
     from tqdm import tqdm
 
@@ -165,12 +169,12 @@ def _run(protocol, jobs: list[Job], source: str, workers: int, progress: bool, n
     try:
         if workers == 1:
             for job in jobs:
-                result = _worker_job((protocol, job, source))
+                result = _worker_job((protocol, job, *source))
                 bar.update(1)
                 yield result
             return
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            pending = {pool.submit(_worker_job, (protocol, job, source)) for job in jobs}
+            pending = {pool.submit(_worker_job, (protocol, job, *source)) for job in jobs}
             try:
                 while pending:
                     done, pending = wait(pending, return_when=FIRST_COMPLETED)

@@ -75,13 +75,13 @@ def gait_of(protocol, stimulus) -> str:
     return stimulus.levels[factor.name]
 
 
-def protocol_figures(protocol, stimulus, look: Look) -> list[Figure]:
+def protocol_figures(protocol, stimulus, look: Look, motions_dir=None) -> list[Figure]:
     """The figures of one stimulus from the protocol's real motion sources."""
     layout = protocol.display.layout
     alternatives = protocol.factors_with_role("alternatives")
     if alternatives:
         kind = alternatives[0].maps_to
-        return [_alternative_figure(protocol, stimulus, look, kind, level, label)
+        return [_alternative_figure(protocol, stimulus, look, kind, level, label, motions_dir)
                 for level, label in zip(stimulus.arrangement, _labels(protocol, len(stimulus.arrangement)))]
     if layout not in ("treadmill", "point_light"):
         raise StimuliError(f"display.layout: {layout} needs a factor with role 'alternatives'")
@@ -96,11 +96,11 @@ def _labels(protocol, n: int) -> list[str]:
     return labels + [""] * (n - len(labels))
 
 
-def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: str) -> Figure:
+def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: str, motions_dir=None) -> Figure:
     body = body_of(protocol, stimulus.body_actor)
     gait = gait_of(protocol, stimulus)
     if kind == "method":
-        rot, root, speed = method_motion(protocol, level, stimulus, gait, body, look)
+        rot, root, speed = method_motion(protocol, level, stimulus, gait, body, look, motions_dir)
     else:
         raise MissingSource(
             f"{protocol.name}: stimulus {stimulus.stimulus_id} needs motions for {kind} = {level!r} "
@@ -109,15 +109,76 @@ def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: 
 
 
 def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
-    """An actor's walk or jog on ``body``'s rig: (rotations, root, belt speed) for the clip's frames."""
-    raise MissingSource(
-        f"{protocol.name}: the motion of actor {actor_id} ({gait}) on body {body.body_id} needs the motion "
-        "generator's output retargeted onto the Anny rig (stimuli.motion), which is not available yet")
+    """An actor's walk or jog on ``body``'s rig: (rotations, root, belt speed) for the clip's frames.
+
+    The motion generator makes the actor's own gait (``params_for_actor``: protocol cadence and
+    speed, the actor's anthropometric trends and individual style, seeded by the protocol), with
+    the whole number of gait cycles closest to the clip's duration; it is then retargeted onto
+    the shown body (Exp 1: swap shape, keep motion) and resampled to the clip's frames.
+    """
+    actor = next(a for a in protocol.actors if a.id == actor_id)
+    if gait not in protocol.gaits:
+        raise StimuliError(f"{protocol.name}: gaits.{gait} is not declared (cadence and speed are needed)")
+    spec = protocol.gaits[gait]
+    cycles = max(1, int(round(look.duration_s * spec.cadence_spm / 120.0)))
+    motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
+                        float(look.fps), cycles)
+    on_body = on_rig(motion, body)
+    rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps)
+    speed = float(on_body.metadata.get("belt_speed_mps", spec.speed_mps)) * scale
+    return rot, root, speed
 
 
-def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look):
-    """NoCOM: the sex × gait average motion; COM: that motion retargeted by physics onto the body."""
-    what = "the sex × gait DTW average motion (stimuli.motion)" if method == "NoCOM" else \
-        "the physics-retargeted COM motion (stimuli.physics) of the average motion"
-    raise MissingSource(f"{protocol.name}: stimulus {stimulus.stimulus_id} needs {what} on the Anny rig, "
-                        "which is not available to the renderer yet")
+@functools.lru_cache(maxsize=16)
+def _generated(actor_json: str, gait: str, cadence: float, speed: float, seed: int, fps: float, cycles: int):
+    """The generator's looped treadmill gait for an actor (cached per process)."""
+    from stimuli.motion.generate import generate
+    from stimuli.motion.style import params_for_actor
+    from stimuli.protocol import Actor
+
+    actor = Actor.model_validate_json(actor_json)
+    anthro = {k: getattr(actor, k) for k in ("body_fat_pct", "waist_m", "hip_m", "chest_m") if getattr(actor, k)}
+    params = params_for_actor(actor.id, actor.height_m, actor.bmi, actor.sex, gait, cadence, speed, seed=seed,
+                              **anthro)
+    return generate(params, height_m=actor.height_m, fps=fps, cycles=cycles)
+
+
+def on_rig(motion, body):
+    """``motion`` on ``body``'s own Anny rig (unchanged when it is on that rig already)."""
+    if list(motion.joint_names) == list(body.rig.names):
+        return motion
+    try:
+        from stimuli.motion.retarget import retarget_to_body
+    except ImportError:
+        raise MissingSource(
+            f"a {motion.metadata.get('source', 'generated')} motion on the {len(motion.joint_names)}-joint "
+            f"skeleton must be retargeted onto the Anny rig of body {body.body_id}; that step "
+            "(stimuli.motion.retarget.retarget_to_body) is not available yet") from None
+    return retarget_to_body(motion, body)
+
+
+def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, motions_dir=None):
+    """NoCOM: the sex × gait average motion; COM: that motion retargeted by physics onto the body.
+
+    Both are read from the folder ``shapemotion physics protocol PROTOCOL --out DIR`` writes:
+    ``DIR/nocom/<sex>_<gait>.npz`` and ``DIR/motions/COM_<actor>_<gait>.npz``.
+    """
+    from pathlib import Path
+
+    from stimuli.motion import Motion
+
+    sex = body.sex
+    if motions_dir is None:
+        raise MissingSource(f"METHOD = {method} needs the NoCOM/COM motions of the physics step: run "
+                            f"'shapemotion physics protocol {protocol.name}.yaml --out DIR' and render with "
+                            "--motions DIR")
+    name = f"nocom/{sex}_{gait}.npz" if method == "NoCOM" else f"motions/COM_{stimulus.body_actor}_{gait}.npz"
+    path = Path(motions_dir) / name
+    if not path.is_file():
+        raise MissingSource(f"--motions {motions_dir}: {name} not found (METHOD = {method}, body "
+                            f"{stimulus.body_actor}, {gait}); run 'shapemotion physics protocol' into that folder")
+    on_body = on_rig(Motion.load(path), body)
+    rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps)
+    spec = protocol.gaits.get(gait)
+    speed = float(on_body.metadata.get("belt_speed_mps", spec.speed_mps if spec else 0.0)) * scale
+    return rot, root, speed
