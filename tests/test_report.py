@@ -167,3 +167,12 @@ def test_analyze_a_folder_of_jspsych_files(reports, tmp_path):
     assert summary["import"]["excluded_by_reason"]["duplicate participant id"] == 80
     html = (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
     assert "<th>file</th>" in html and "shapemotion_exp2_1_copy.csv" in html
+
+
+def test_nothing_left_after_exclusions_is_a_user_error(run_cli, tmp_path):
+    bad = tmp_path / "r.csv"
+    bad.write_text("participant,stimulus_id,response\nA,walk-Hi1-NoCOM_COM,maybe\n")
+    code, _, err = run_cli("analyze", str(DATA / "mini_afc"), "--responses", str(bad), "--out", str(tmp_path / "out"))
+    err = " ".join(err.split())   # the CLI wraps long messages
+    assert code == 2 and "no participant is left" in err and "answer outside the scale" in err
+    assert not (tmp_path / "out").exists()

@@ -36,6 +36,8 @@ def _damage(rows, edits):
         if not body:
             break
         i = index % len(body)
+        if kind in ("garbage", "unknown", "blank_participant") and len(body[i]) < len(header):
+            continue  # a truncated row has no such cell any more
         if kind == "drop":
             body.pop(i)
         elif kind == "garbage":

@@ -167,7 +167,8 @@ def _table(scored, design: DesignInfo, stimuli: pd.DataFrame, trialwise: bool) -
     score_cols = {"likert": ["rating"], "afc": ["chosen", "position"], "ranking": ["ranking"]}[design.response_type]
     columns = ["participant", *factor_cols, "stimulus_id", "repetition", "trial", *score_cols, "rt", "practice", "row"]
     table = pd.DataFrame.from_records(records, columns=columns)
-    table = table.astype({"repetition": "Int64", "trial": "Int64", "row": "Int64"})
+    # explicit dtypes, so that an empty table (everyone excluded) still behaves like a full one
+    table = table.astype({"repetition": "Int64", "trial": "Int64", "row": "Int64", "practice": bool, "rt": float})
     if design.response_type in ("likert",):
         table["rating"] = table["rating"].astype("Int64")
     if design.response_type == "afc":
