@@ -111,9 +111,10 @@ def figure4(cells: pd.DataFrame, design: DesignInfo, stem: Path, dv: str = "rati
         stats = mean_se(sub, dv, [body, motion])
         _bars(ax, stats, body, motion, design, "mean rating", star=lambda b, m: b == m, ylim=(1, k + 0.6))
         ax.set_title(", ".join(f"{f} = {design.factor(f).abbreviation(v)}" for f, v in panel.items()))
-    axes.ravel()[0].legend(title=motion, fontsize=7, title_fontsize=7, ncols=2, loc="upper left")
+    handles, labels = axes.ravel()[0].get_legend_handles_labels()
+    fig.legend(handles, labels, title=motion, fontsize=8, title_fontsize=8, ncols=len(labels), loc="lower center")
     fig.suptitle("Mean rating per body and motion (* consistent: same actor's body and motion; ± SE)", fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     return save_figure(fig, stem)
 
 
