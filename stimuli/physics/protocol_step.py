@@ -22,7 +22,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-5"
+CODE_VERSION = "physics-6"
 
 
 def cache_dir() -> Path:
@@ -172,6 +172,7 @@ def _summary(reports: list[dict], path: Path) -> None:
              "knee_flexion_stance_peak_deg": r.get("knee_flexion_stance_peak_deg"),
              "knee_extension_moment_peak_nm_per_kg": r.get("knee_extension_moment_peak_nm_per_kg"),
              "root_com_excursion_cm": r.get("root_com_excursion_cm"),
-             "root_drift_vertical_max_m": r["root_drift"]["vertical_max_m"], "fell": r["fell"],
+             "root_drift_vertical_max_m": r["root_drift"]["vertical_max_m"], "flight_fraction": r.get("flight_fraction"),
+             "fell": r["fell"],
              "wall_per_simulated": r["wall_per_simulated"]} for r in reports]
     pd.DataFrame(rows).sort_values(["gait", "sex", "actor"]).to_csv(path, index=False)

@@ -93,6 +93,9 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
         "tracking_rms_deg": {k: round(v, 3) for k, v in track.items()},
         "tracking_rms_deg_overall": round(float(np.sqrt(np.mean(np.square(list(track.values()))))), 3),
         "root_drift": {k: round(v, 4) for k, v in root_drift(sim).items()},
+        # Steps with neither foot on the floor: a walk has none (double support instead); the
+        # tracked ragdoll still hops between steps (readme: known limits).
+        "flight_fraction": round(float((~sim.foot_contact.any(axis=1)).mean()), 4) if len(sim.foot_contact) else None,
         "fell": bool(sim.fell), "fall_time_s": sim.fall_time_s, "fall_reason": sim.fall_reason,
         "simulated_s": round(sim.simulated_s, 4), "wall_s": round(sim.wall_s, 4),
         "wall_per_simulated": round(sim.wall_s / sim.simulated_s, 4), "timestep_s": sim.timestep,
