@@ -19,11 +19,12 @@ from stimuli.motion.metrics import GRAVITY, segment_com
 from stimuli.motion.motion import Motion
 
 
-def support_centre(motion: Motion, contacts: dict[str, np.ndarray], floor_y: float | None = None) -> np.ndarray:
+def support_centre(motion: Motion, contacts: dict[str, np.ndarray], floor_y: float | None = None,
+                   points: dict | None = None) -> np.ndarray:
     """Per frame, the horizontal centre (T×2: x, z) of the sole points of the feet in contact;
     frames without contact are interpolated (periodically) from their neighbours."""
     grot, gpos = motion.global_transforms()
-    pts = sole_points(motion, floor_y)
+    pts = sole_points(motion, floor_y) if points is None else points
     acc = np.zeros((motion.n_frames, 2))
     cnt = np.zeros(motion.n_frames)
     for s in ("l", "r"):
@@ -50,11 +51,11 @@ def balanced_com(zmp: np.ndarray, height: float, fps: float) -> np.ndarray:
 
 
 def balance(motion: Motion, contacts: dict[str, np.ndarray], floor_y: float | None = None,
-            strength: float = 1.0) -> Motion:
+            strength: float = 1.0, points: dict | None = None) -> Motion:
     """Shift the root horizontally so the CoM follows the balanced path (looped clips only)."""
     pos = motion.positions()
     com = segment_com(motion, pos)
-    want = balanced_com(support_centre(motion, contacts, floor_y), float(com[:, 1].mean()), motion.fps)
+    want = balanced_com(support_centre(motion, contacts, floor_y, points), float(com[:, 1].mean()), motion.fps)
     shift = (want - com[:, [0, 2]]) * strength
     root = motion.root_translation.copy()
     root[:, 0] += shift[:, 0]

@@ -101,3 +101,27 @@ def contacts(points: np.ndarray, fps: float, belt_velocity: np.ndarray | None = 
     touch = np.any(low & slow, axis=1)
     touch = uniform_filter1d(touch.astype(float), 3, mode="wrap") > 0.5
     return touch
+
+
+def stance_from_events(motion, positions: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Per foot, frames from each heel strike to the next toe off (Zeni events).
+
+    A looped clip is analysed as three copies so that events at the seam are found.
+    """
+    from stimuli.motion.loop import repeat
+
+    looped = bool(motion.metadata.get("looped"))
+    rep = repeat(motion, 3) if looped else motion
+    ev = gait_events(rep, None if looped else positions)
+    n = rep.n_frames
+    out = {}
+    for s in ("l", "r"):
+        mask = np.zeros(n, bool)
+        hs, to = np.sort(ev[f"{s}_hs"]), np.sort(ev[f"{s}_to"])
+        for h in hs:
+            later = to[to > h]
+            mask[h:(later[0] if len(later) else n)] = True
+        if len(to) and (not len(hs) or to[0] < hs[0]):
+            mask[:to[0]] = True  # the clip starts in stance
+        out[s] = mask[motion.n_frames:2 * motion.n_frames] if looped else mask
+    return out

@@ -101,7 +101,8 @@ def two_bone_ik(motion: Motion, rot: np.ndarray, root: np.ndarray, side: str, ta
     out[:, hip] = quat.mul(rot[:, hip], quat.mul(r0, r2))
     out[:, knee] = quat.mul(rot[:, knee], r1)
     grot2, _ = motion.global_transforms(out, root)
-    out[:, ankle] = quat.mul(quat.inv(grot2[:, knee]), keep_foot)
+    # The foot's parent may be a twist bone below the knee (Anny's lowerleg02).
+    out[:, ankle] = quat.mul(quat.inv(grot2[:, motion.parents[ankle]]), keep_foot)
     return out
 
 
@@ -173,7 +174,8 @@ def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
 
 def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: float = 0.0,
                floor_y: float | None = None, cyclic: bool = True, iterations: int = 2,
-               clearance_m: float = 0.0, reference: Motion | None = None) -> Motion:
+               clearance_m: float = 0.0, reference: Motion | None = None,
+               points: dict | None = None) -> Motion:
     """Apply the contact clean-up to a motion; ``contacts`` maps "l"/"r" to T booleans.
 
     ``clearance_m`` lifts a swinging foot whose lowest point would pass lower than a half-sine
@@ -182,7 +184,7 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     was moved for balance, so that moving the pelvis does not move the footprints.
     """
     belt = np.array([0.0, 0.0, -belt_speed])
-    points = sole_points(motion, floor_y)
+    points = sole_points(motion, floor_y) if points is None else points
     roles = role_indices(motion)
     rot, root = motion.rotations.copy(), motion.root_translation.copy()
     rot = flatten_feet(motion, rot, root, contacts, cyclic)
@@ -238,6 +240,18 @@ def _contact_mean_yaw(yaw: np.ndarray, contact: np.ndarray) -> np.ndarray:
     return np.roll(y, shift)
 
 
+def early_stance(contact: np.ndarray) -> np.ndarray:
+    """Frames in the first half of each contact."""
+    out = np.zeros(len(contact), bool)
+    if not contact.any() or contact.all():
+        return out
+    shift = int(np.argmin(contact))
+    c = np.roll(contact, -shift)
+    for s, e in _intervals(c):
+        out[s:s + (e - s + 1) // 2] = True
+    return np.roll(out, shift)
+
+
 def flatten_feet(motion: Motion, rot: np.ndarray, root: np.ndarray, contacts: dict[str, np.ndarray],
                  cyclic: bool = True) -> np.ndarray:
     """Turn planted feet flat on the ground (keeping their heading) during mid-stance.
@@ -248,12 +262,16 @@ def flatten_feet(motion: Motion, rot: np.ndarray, root: np.ndarray, contacts: di
     out = rot.copy()
     grot, _ = motion.global_transforms(rot, root)
     for s in SIDES:
-        ankle, knee = roles[f"{s}_ankle"], roles[f"{s}_knee"]
+        ankle, parent = roles[f"{s}_ankle"], motion.parents[roles[f"{s}_ankle"]]
         fwd = quat.rotate(grot[:, ankle], np.array([0.0, 0.0, 1.0]))
         yaw = _contact_mean_yaw(np.arctan2(fwd[:, 0], fwd[:, 2]), contacts[s])
         flat = quat.from_axis_angle(np.stack([0 * yaw, yaw, 0 * yaw], -1))
         want = quat.slerp(grot[:, ankle], flat, flat_weight(contacts[s]))
-        out[:, ankle] = quat.mul(quat.inv(grot[:, knee]), want)
+        # Before mid-stance the heel stays down: a foot pitching toes-down is laid flat instead
+        # (otherwise the heel would lift and slide as the toes land).
+        toes_down = quat.rotate(want, np.array([0.0, 0.0, 1.0]))[:, 1] < 0
+        want[toes_down & early_stance(contacts[s])] = flat[toes_down & early_stance(contacts[s])]
+        out[:, ankle] = quat.mul(quat.inv(grot[:, parent]), want)
     return out
 
 

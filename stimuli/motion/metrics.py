@@ -6,8 +6,9 @@ cycles, knee flexion range. Plausibility, after Tripathi et al. (HUMOS) and Yuan
 * **Penetrate** (cm): mean over frames of how far the lowest point lies below the ground.
 * **Float** (cm): mean, over frames in which a foot should touch (it is planted: slow relative to
   the ground/belt and within 5 cm of it), of the height of that foot's lowest point.
-* **Skate** (%): share of adjacent frame pairs in which a foot in contact (lowest point within
-  1 cm of the ground in both frames) moves horizontally faster than 0.1 m/s relative to the belt.
+* **Skate** (%): share of adjacent frame pairs in which a foot in contact (points within 1 cm of
+  the ground in both frames) slides: every touching point moves horizontally faster than 0.1 m/s
+  relative to the belt (a foot rolling about a planted heel or ball does not skate).
 * **Dynamically unstable** (%): frames whose zero-moment point (from the centre of mass and its
   acceleration, flat ground) lies outside the base of support (convex hull of the contact points
   of the feet in contact, padded by the foot's width); a frame without contact (flight) counts as
@@ -70,23 +71,21 @@ def foot_contacts(sole: dict[str, np.ndarray], fps: float, belt_speed: float = 0
     return {s: pts[:, :, 1].min(axis=1) <= height for s, pts in sole.items()}
 
 
-def gait_metrics(motion) -> dict:
+def gait_metrics(motion, points: dict | None = None) -> dict:
     """Cadence (steps/min), speed (m/s), step length (m), walking base (m), stance/double-support/
     flight (%), cycles, knee flexion range (°)."""
     rep, k = _periodic(motion)
     ev = gait_events(rep)
-    hs = np.sort(np.concatenate([ev["l_hs"], ev["r_hs"]]))
-    if len(hs) >= 2:
-        cadence = 60.0 * motion.fps / float(np.median(np.diff(hs)))
-    else:
-        cadence = float("nan")
+    # Strides of the same foot (two steps each): robust to left/right step asymmetry.
+    strides = np.concatenate([np.diff(ev["l_hs"]), np.diff(ev["r_hs"])])
+    cadence = 120.0 * motion.fps / float(np.median(strides)) if len(strides) else float("nan")
     if motion.metadata.get("treadmill"):
         speed = float(motion.metadata.get("belt_speed_mps", 0.0))
     else:
         disp = motion.root_translation[-1] - motion.root_translation[0]
         speed = float(np.linalg.norm(disp[[0, 2]]) / max((motion.n_frames - 1) / motion.fps, 1e-9))
     grot, gpos = rep.global_transforms()
-    pts = sole_points(rep)
+    pts = sole_points(rep) if points is None else points
     sole = {s: sole_positions(grot, gpos, pts[s]) for s in ("l", "r")}
     contact = foot_contacts(sole, rep.fps)
     stance = 100.0 * np.mean([contact[s].mean() for s in ("l", "r")])
@@ -143,7 +142,7 @@ def zmp(com: np.ndarray, fps: float, belt_speed: float = 0.0) -> np.ndarray:
 
 def plausibility(sole: dict[str, np.ndarray], lowest_y: np.ndarray, com: np.ndarray, fps: float,
                  belt_speed: float = 0.0, lateral: dict[str, np.ndarray] | None = None,
-                 periodic: bool = True) -> dict:
+                 periodic: bool = True, skate_points: dict[str, np.ndarray] | None = None) -> dict:
     """Penetrate/Float (cm), Skate and dynamically unstable (%) from contact points and the CoM.
 
     ``sole``: per foot, T×P×3 points that can touch the ground (sole points or foot vertices);
@@ -154,7 +153,17 @@ def plausibility(sole: dict[str, np.ndarray], lowest_y: np.ndarray, com: np.ndar
     dt = 1.0 / fps
     penetrate = 100.0 * float(np.mean(np.maximum(0.0, -lowest_y)))
     contact = foot_contacts(sole, fps)
+    skate_points = sole if skate_points is None else skate_points
     float_vals, skate_pairs = [], np.zeros(len(lowest_y) - 1, bool)
+    for s, pts in skate_points.items():
+        after = np.roll(pts, -1, 0) if periodic else np.concatenate([pts[1:], pts[-1:]])
+        vel = (after - pts) / dt - belt
+        speed = np.linalg.norm(vel[:, :, [0, 2]], axis=2)
+        touching = np.maximum(pts[:, :, 1], after[:, :, 1]) <= CONTACT_HEIGHT_M
+        # A foot slides only if none of its touching points stays put: rolling about a planted
+        # heel or ball is not skating.
+        still = np.where(touching, speed, np.inf).min(axis=1)
+        skate_pairs |= (touching.any(axis=1) & (still > SKATE_SPEED_MPS))[:-1]
     for s, pts in sole.items():
         after = np.roll(pts, -1, 0) if periodic else np.concatenate([pts[1:], pts[-1:]])
         # The point that touches in both frames of the pair: lowest by its higher of the two heights.
@@ -165,8 +174,6 @@ def plausibility(sole: dict[str, np.ndarray], lowest_y: np.ndarray, com: np.ndar
         speed = np.linalg.norm(vel[:, [0, 2]], axis=1)
         planted = (speed < PLANTED_SPEED_MPS) & (low[:, 1] < SHOULD_TOUCH_HEIGHT_M)
         float_vals.append(np.where(planted, np.maximum(low[:, 1], 0.0), np.nan))
-        both = contact[s][:-1] & contact[s][1:]
-        skate_pairs |= both & (speed[:-1] > SKATE_SPEED_MPS)
     fv = np.concatenate(float_vals)
     floating = 100.0 * float(np.nanmean(fv)) if np.isfinite(fv).any() else 0.0
     z = zmp(com, fps, belt_speed)
@@ -210,10 +217,11 @@ def plausibility_from_joints(motion) -> dict:
                         lateral, periodic=bool(motion.metadata.get("looped")))
 
 
-def plausibility_from_mesh(vertices: np.ndarray, vertex_mass: np.ndarray, foot_vertices: dict[str, np.ndarray],
-                           fps: float, belt_speed: float = 0.0, periodic: bool = True) -> dict:
-    """Plausibility on a skinned mesh: T×V×3 vertices, V masses, per-foot vertex index arrays."""
+def plausibility_from_mesh(vertices: np.ndarray, foot_vertices: dict[str, np.ndarray], com: np.ndarray,
+                           fps: float, belt_speed: float = 0.0, periodic: bool = True,
+                           skate_points: dict[str, np.ndarray] | None = None) -> dict:
+    """Plausibility on a skinned mesh: T×V×3 vertices, per-foot vertex index arrays, T×3 CoM;
+    ``skate_points`` as in :func:`plausibility` (the feet's anatomical sole points on the mesh)."""
     lowest = vertices[:, :, 1].min(axis=1)
-    com = np.einsum("tvi,v->ti", vertices, vertex_mass) / vertex_mass.sum()
     sole = {s: vertices[:, idx] for s, idx in foot_vertices.items()}
-    return plausibility(sole, lowest, com, fps, belt_speed, None, periodic)
+    return plausibility(sole, lowest, com, fps, belt_speed, None, periodic, skate_points)

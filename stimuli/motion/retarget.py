@@ -1,0 +1,239 @@
+"""Retargeting any motion onto the Anny rig of a fitted body (``stimuli.bodies``).
+
+Method (rest-pose alignment, then clean-up):
+
+1. Every mapped Anny bone takes the *world* rotation of the source joint that drives the same
+   limb segment, composed with a fixed rest alignment A = between(Anny rest direction, source rest
+   direction): G_anny(t) = D_src(t) · A. This absorbs rest-pose differences (a T-pose source on
+   Anny's A-pose, splayed legs, a CMU foot bone pointing down) while keeping the source's twist; a
+   final swing makes each bone point exactly along the source segment. The spine is spread over
+   Anny's five spine bones by slerp between pelvis and chest, the neck over its three.
+2. The pelvis path is scaled by the leg-length ratio (hip-joint height of the rests): root height
+   and stride follow the target's legs, so the belt speed scales too (recorded).
+3. Foot clean-up (``footfix``): contacts are detected on the retargeted feet (near the ground and
+   slow relative to the belt), planted feet are pinned and moved at belt speed by two-bone IK, the
+   sole points come from the body mesh so the ground is at y = 0.
+
+Twist bones, toes and fingers keep their rest orientation relative to their parents.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stimuli.errors import StimuliError
+from stimuli.motion import quat
+from stimuli.motion.events import contacts as detect_contacts
+from stimuli.motion.events import stance_from_events
+from stimuli.motion.balance import balance
+from stimuli.motion.footfix import clean_feet, sole_positions
+from stimuli.motion.motion import Motion
+from stimuli.motion.skeleton import NAMINGS, role_indices
+
+ANNY_ROLES = {role: names[0] for role, names in NAMINGS["anny"].items()}
+# Anny bone → (source role whose world rotation drives it, (from role, to role) of the segment).
+LIMBS = {}
+for _s, _S in (("l", "L"), ("r", "R")):
+    LIMBS.update({
+        f"upperleg01.{_S}": (f"{_s}_hip", (f"{_s}_hip", f"{_s}_knee")),
+        f"lowerleg01.{_S}": (f"{_s}_knee", (f"{_s}_knee", f"{_s}_ankle")),
+        f"foot.{_S}": (f"{_s}_ankle", (f"{_s}_ankle", f"{_s}_toe")),
+        f"clavicle.{_S}": (f"{_s}_clavicle", (f"{_s}_clavicle", f"{_s}_shoulder")),
+        f"upperarm01.{_S}": (f"{_s}_shoulder", (f"{_s}_shoulder", f"{_s}_elbow")),
+        f"lowerarm01.{_S}": (f"{_s}_elbow", (f"{_s}_elbow", f"{_s}_wrist")),
+    })
+SPINE = ["spine05", "spine04", "spine03", "spine02", "spine01"]
+NECK = ["neck01", "neck02", "neck03", "head"]
+CONTACT_HEIGHT_M = 0.06
+CONTACT_SPEED_MPS = 0.45
+NEAR_GROUND_M = 0.025
+STANCE_HEIGHT_M = 0.03
+
+
+def _rest_pos(rig) -> np.ndarray:
+    return np.asarray(rig.rest_heads, float)
+
+
+def anny_motion(body, rotations: np.ndarray, root: np.ndarray, fps: float, metadata: dict) -> Motion:
+    """A Motion on the body's Anny rig (joint names, parents and offsets of ``body.rig``)."""
+    rig = body.rig
+    meta = dict(metadata)
+    meta.update(naming="anny", roles=dict(ANNY_ROLES), body_id=getattr(body, "body_id", None))
+    return Motion(fps=fps, joint_names=list(rig.names), parents=np.asarray(rig.parents), offsets=np.asarray(rig.offsets),
+                  rotations=rotations, root_translation=root, metadata=meta)
+
+
+def _leg_height(rest: np.ndarray, roles: dict[str, int], floor: float) -> float:
+    return float(np.mean([rest[roles[f"{s}_hip"], 1] for s in ("l", "r")]) - floor)
+
+
+def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
+    """Anny world rotations (T×J×4) for the mapped bones; unmapped bones get None (marked)."""
+    roles = role_indices(source)
+    missing = [r for r in ("pelvis", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle") if r not in roles]
+    if missing:
+        raise StimuliError(f"retarget: source motion lacks role(s) {', '.join(missing)}")
+    grot, gpos = source.global_transforms()
+    src_rest = source.rest_positions()
+    tgt_rest = _rest_pos(rig)
+    t = source.n_frames
+    world: dict[int, np.ndarray] = {}
+    world[rig.index("root")] = grot[:, roles["pelvis"]]
+    chest = grot[:, roles["chest"]] if "chest" in roles else grot[:, roles["pelvis"]]
+    for i, name in enumerate(SPINE):
+        world[rig.index(name)] = quat.slerp(world[rig.index("root")], chest, np.full(t, (i + 1) / len(SPINE)))
+    head = grot[:, roles["head"]] if "head" in roles else chest
+    for i, name in enumerate(NECK):
+        world[rig.index(name)] = quat.slerp(chest, head, np.full(t, (i + 1) / len(NECK)))
+    for bone, (driver, (a, b)) in LIMBS.items():
+        if driver not in roles or a not in roles or b not in roles:
+            continue
+        tb = {"upperleg01": "lowerleg01", "lowerleg01": "foot", "foot": "toe1-1", "clavicle": "upperarm01",
+              "upperarm01": "lowerarm01", "lowerarm01": "wrist"}[bone.split(".")[0]] + "." + bone.split(".")[1]
+        r_t = tgt_rest[rig.index(tb)] - tgt_rest[rig.index(bone)]
+        r_s = src_rest[roles[b]] - src_rest[roles[a]]
+        if np.linalg.norm(r_s) < 1e-6 or np.linalg.norm(r_t) < 1e-6:
+            continue
+        align = quat.between(r_t, r_s)
+        g = quat.mul(grot[:, roles[driver]], align)
+        # Exact direction: swing the bone onto the source segment (corrects intermediate joints).
+        want = gpos[:, roles[b]] - gpos[:, roles[a]]
+        have = quat.rotate(g, r_t)
+        world[rig.index(bone)] = quat.mul(quat.between(have, want), g)
+    return world, roles
+
+
+def _to_local(world: dict[int, np.ndarray], parents: np.ndarray, t: int) -> np.ndarray:
+    """Local rotations from world rotations; unmapped bones follow their parent (local identity)."""
+    j = len(parents)
+    glob = np.tile(quat.IDENTITY, (t, j, 1))
+    local = np.tile(quat.IDENTITY, (t, j, 1))
+    for k in range(j):
+        p = parents[k]
+        if k in world:
+            glob[:, k] = world[k]
+            local[:, k] = world[k] if p < 0 else quat.mul(quat.inv(glob[:, p]), world[k])
+        else:
+            glob[:, k] = glob[:, p] if p >= 0 else quat.IDENTITY
+    return local
+
+
+def mesh_sole_points(body) -> dict[str, list[tuple[int, np.ndarray]]]:
+    """Heel, ball and toe-tip points of each foot from the rest mesh, attached to the foot bone."""
+    rig = body.rig
+    v = np.asarray(body.vertices, float)
+    rest = _rest_pos(rig)
+    out = {}
+    for s, S, sign in (("l", "L", 1.0), ("r", "R", -1.0)):
+        foot = rig.index(f"foot.{S}")
+        side = (v[:, 0] * sign > 0.02) & (v[:, 1] < 0.03)
+        sole = v[side]
+        if len(sole) < 3:
+            raise StimuliError(f"retarget: body {getattr(body, 'body_id', '?')} has no sole vertices on side {S}")
+        heel = sole[np.argmin(sole[:, 2])]
+        tip = sole[np.argmax(sole[:, 2])]
+        ball_z = rest[rig.index(f"toe1-1.{S}"), 2]
+        ball = sole[np.argmin(np.abs(sole[:, 2] - ball_z) + 10 * sole[:, 1])]
+        pts = []
+        for p in (heel, ball, tip):
+            q = p.copy()
+            q[1] = 0.0  # the rest mesh stands on y = 0
+            pts.append((foot, q - rest[foot]))
+        out[s] = pts
+    return out
+
+
+def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = False) -> Motion:
+    """Retarget ``source`` onto ``body``'s Anny rig (see the module docstring).
+
+    ``source`` should be a treadmill loop (``make_loop``) or a generated motion; an overground
+    motion is retargeted too (its path scaled). ``keep_speed`` keeps the source's belt speed
+    instead of scaling the stride by the leg-length ratio.
+    """
+    rig = body.rig
+    world, roles = _world_rotations(source, rig)
+    rot = _to_local(world, np.asarray(rig.parents), source.n_frames)
+    src_rest = source.rest_positions()
+    tgt_rest = _rest_pos(rig)
+    src_floor = float(src_rest[:, 1].min())
+    k = _leg_height(tgt_rest, {f"{s}_hip": rig.index(f"upperleg01.{s.upper()}") for s in "lr"}, 0.0) / \
+        _leg_height(src_rest, roles, src_floor)
+    p = source.positions()[:, roles["pelvis"]]
+    root = p * k
+    root[:, 1] = tgt_rest[0, 1] + k * (p[:, 1] - (src_rest[roles["pelvis"], 1] - src_floor))
+    belt = float(source.metadata.get("belt_speed_mps", 0.0))
+    meta = {k_: v for k_, v in source.metadata.items() if k_ not in ("roles", "naming")}
+    meta.update(source=f"{source.metadata.get('source', 'motion')}→anny", leg_scale=k,
+                belt_speed_mps=belt if keep_speed else belt * k, retargeted=True)
+    if keep_speed and source.metadata.get("treadmill"):
+        root[:, [0, 2]] = p[:, [0, 2]]
+    out = anny_motion(body, rot, root, source.fps, meta)
+    if cleanup:
+        out = cleanup_feet(out, body)
+    return out
+
+
+def planted(motion: Motion, body) -> dict[str, np.ndarray]:
+    """Feet in contact: heel strike to toe off (Zeni events), grown by up to two frames where the
+    foot is still near the ground; detected from height and belt-relative speed if no events."""
+    grot, gpos = motion.global_transforms()
+    pts = mesh_sole_points(body)
+    belt = np.array([0.0, 0.0, -float(motion.metadata.get("belt_speed_mps", 0.0))]) \
+        if motion.metadata.get("treadmill") else None
+    stance = stance_from_events(motion, gpos)
+    out = {}
+    for s in ("l", "r"):
+        sole = sole_positions(grot, gpos, pts[s])
+        low = sole[:, :, 1].min(axis=1)
+        # Zeni's toe off is late in running: keep only the frames the foot is still near its lowest.
+        near = low - np.percentile(low, 2) < STANCE_HEIGHT_M
+        c = stance[s] & near if stance[s].any() else detect_contacts(sole, motion.fps, belt, CONTACT_HEIGHT_M,
+                                                                       CONTACT_SPEED_MPS)
+        out[s] = _dilate_near_ground(c, sole[:, :, 1].min(axis=1), bool(motion.metadata.get("looped")))
+    return out
+
+
+def _dilate_near_ground(contact: np.ndarray, low: np.ndarray, cyclic: bool, height: float = NEAR_GROUND_M) -> np.ndarray:
+    """Grow each contact over neighbouring frames whose lowest point is still near the ground: the
+    landing and lift-off frames are planted too (a foot grazing the ground must not slide)."""
+    c = contact.copy()
+    n = len(c)
+    if not c.any():
+        return c
+    for _ in range(2):
+        grow = (np.roll(c, 1) | np.roll(c, -1)) & ~c & (low < height)
+        if not cyclic:
+            grow[0] &= c[1]
+            grow[-1] &= c[-2]
+        if not grow.any():
+            break
+        c |= grow
+    return c
+
+
+def cleanup_feet(motion: Motion, body, balance_root: bool = True) -> Motion:
+    """Ground the body (lowest sole point of the planted feet at y = 0), then the contact clean-up."""
+    grot, gpos = motion.global_transforms()
+    pts = mesh_sole_points(body)
+    low = np.min([sole_positions(grot, gpos, pts[s])[:, :, 1].min(axis=1) for s in ("l", "r")], axis=0)
+    # Shift the whole clip so its typical lowest foot point is on the ground (mocap floors vary).
+    shifted = motion.root_translation.copy()
+    shifted[:, 1] -= float(np.percentile(low, 10))
+    m = motion.replace(root_translation=shifted)
+    known = m.metadata.get("contacts")
+    if known and all(len(known.get(s, [])) == m.n_frames for s in ("l", "r")):
+        contact = {s: np.asarray(known[s], bool) for s in ("l", "r")}  # e.g. the generator's stance phases
+    else:
+        contact = planted(m, body)
+    belt = float(m.metadata.get("belt_speed_mps", 0.0)) if m.metadata.get("treadmill") else 0.0
+    cyclic = bool(m.metadata.get("looped"))
+    out = clean_feet(m, contact, belt_speed=belt, cyclic=cyclic, points=pts, clearance_m=0.03, iterations=3)
+    walking = bool(np.all(contact["l"] | contact["r"]))
+    if cyclic and balance_root and walking:
+        # Move the pelvis so the ZMP follows the feet, then re-plant the feet where they were
+        # (walks only: with a flight phase the cart-table model has no support to follow).
+        balanced = balance(out, contact, points=pts)
+        out = clean_feet(balanced, contact, belt_speed=belt, cyclic=True, points=pts, clearance_m=0.03, iterations=3,
+                         reference=out)
+    out.metadata["contacts"] = {s: c.astype(int).tolist() for s, c in contact.items()}
+    return out
