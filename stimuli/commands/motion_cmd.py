@@ -1,0 +1,245 @@
+"""``shapemotion motion generate|import|average|modify|metrics|export-bvh|retarget|markers|strip``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from stimuli.errors import StimuliError
+
+
+def register(subparsers) -> None:
+    motion = subparsers.add_parser("motion", help="generate, import, average, modify and measure motions",
+                                   description="Motions as .npz files (DESIGN.md contract) and BVH.")
+    sub = motion.add_subparsers(dest="motion_command", metavar="ACTION", required=True)
+
+    p = sub.add_parser("generate", help="a looped treadmill walk or jog for a body or an actor")
+    p.add_argument("--gait", choices=["walk", "jog"], default="walk")
+    p.add_argument("--cadence", type=float, default=None, help="steps/min (default: protocol or 112/138)")
+    p.add_argument("--speed", type=float, default=None, help="m/s (default: protocol or 1.2/2.2)")
+    p.add_argument("--height", type=float, default=1.75, help="body height in m")
+    p.add_argument("--bmi", type=float, default=None, help="BMI: applies the anthropometric gait trends")
+    p.add_argument("--sex", choices=["F", "M"], default="M")
+    p.add_argument("--protocol", type=Path, help="take the actor, cadence, speed and seed from a protocol")
+    p.add_argument("--actor", help="actor id in the protocol (e.g. F_Hi1)")
+    p.add_argument("--seed", type=int, default=None, help="style seed (default: protocol seed or 0)")
+    p.add_argument("--no-style", action="store_true", help="no individual style, trends only")
+    p.add_argument("--fps", type=float, default=30.0)
+    p.add_argument("--cycles", type=int, default=2)
+    p.add_argument("--out", type=Path, required=True, help="output .npz")
+    p.add_argument("--bvh", type=Path, help="also write a BVH file")
+    p.set_defaults(func=run_generate)
+
+    p = sub.add_parser("import", help="import a BVH or AMASS .npz, optionally as a treadmill loop")
+    p.add_argument("source", type=Path)
+    p.add_argument("--mapping", type=Path, help="YAML/JSON {role: joint} for unknown skeleton namings")
+    p.add_argument("--height", type=float, default=None, help="performer height in m (scales the skeleton)")
+    p.add_argument("--loop", action="store_true", help="trim to whole cycles, put on a treadmill, loop")
+    p.add_argument("--cycles", type=int, default=None, help="whole cycles to keep when looping")
+    p.add_argument("--fps", type=float, default=None, help="resample to this frame rate")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=run_import)
+
+    p = sub.add_parser("average", help="DTW-aligned average of several motions on one skeleton")
+    p.add_argument("motions", type=Path, nargs="+")
+    p.add_argument("--cycles", type=int, default=2)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=run_average)
+
+    p = sub.add_parser("modify", help="the thesis's five-parameter body-shape walk modifier")
+    p.add_argument("motion", type=Path)
+    p.add_argument("--height", type=float, required=True, help="target height in m")
+    p.add_argument("--body-fat", type=float, required=True, help="target body fat in %%")
+    p.add_argument("--chest", type=float, default=None, help="chest in m (default: interpolated from body fat)")
+    p.add_argument("--wthr", type=float, default=None, help="waist-to-hip ratio (default: interpolated)")
+    p.add_argument("--base-scale", type=float, default=1.0, help="multiplies the thesis's walking-base offset")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=run_modify)
+
+    p = sub.add_parser("metrics", help="gait figures and HUMOS plausibility metrics of a motion")
+    p.add_argument("motion", type=Path)
+    p.add_argument("--body", help="sex=M,height=1.80,bmi=25: measure on the skinned mesh of this body")
+    p.add_argument("--json", type=Path, help="write the metrics as JSON")
+    p.set_defaults(func=run_metrics)
+
+    p = sub.add_parser("export-bvh", help="write a motion as BVH")
+    p.add_argument("motion", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--order", default="ZYX", help="rotation channel order")
+    p.add_argument("--scale", type=float, default=1.0, help="length unit multiplier (100: centimetres)")
+    p.set_defaults(func=run_export)
+
+    p = sub.add_parser("retarget", help="retarget a motion onto the Anny rig of a fitted body")
+    p.add_argument("motion", type=Path)
+    p.add_argument("--body", required=True, help="sex=M,height=1.80,bmi=25")
+    p.add_argument("--keep-speed", action="store_true", help="keep the belt speed (no stride scaling)")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=run_retarget)
+
+    p = sub.add_parser("markers", help="the 15 point-light marker trajectories as CSV")
+    p.add_argument("motion", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=run_markers)
+
+    p = sub.add_parser("strip", help="a frame strip (poses across one cycle, side view) as PNG")
+    p.add_argument("motions", type=Path, nargs="+")
+    p.add_argument("--frames", type=int, default=8)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=run_strip)
+
+
+def parse_body(spec: str) -> dict:
+    """``sex=M,height=1.80,bmi=25`` → {"sex": "M", "height_m": 1.8, "bmi": 25.0}."""
+    out = {}
+    for part in spec.split(","):
+        if "=" not in part:
+            raise StimuliError(f"--body {spec!r}: expected key=value pairs like sex=M,height=1.80,bmi=25")
+        k, v = (x.strip() for x in part.split("=", 1))
+        if k == "sex":
+            out["sex"] = v.upper()
+        elif k in ("height", "bmi"):
+            try:
+                out["height_m" if k == "height" else "bmi"] = float(v)
+            except ValueError:
+                raise StimuliError(f"--body: {k} must be a number, got {v!r}") from None
+        else:
+            raise StimuliError(f"--body: unknown key {k!r} (expected sex, height, bmi)")
+    missing = {"sex", "height_m", "bmi"} - set(out)
+    if missing:
+        raise StimuliError(f"--body {spec!r}: missing {', '.join(sorted(missing))}")
+    return out
+
+
+def _fit(spec: str):
+    from stimuli.bodies import fit_body
+
+    b = parse_body(spec)
+    return fit_body(b["sex"], b["height_m"], b["bmi"])
+
+
+def _load(path: Path):
+    from stimuli.motion import Motion
+
+    if not path.is_file():
+        raise StimuliError(f"{path}: motion file not found")
+    if path.suffix.lower() == ".bvh":
+        from stimuli.motion.bvh import read_bvh
+        return read_bvh(path)
+    return Motion.load(path)
+
+
+def run_generate(args: argparse.Namespace) -> int:
+    from stimuli.motion.bvh import write_bvh
+    from stimuli.motion.generate import generate
+    from stimuli.motion.style import params_for_actor
+
+    defaults = {"walk": (112.0, 1.2), "jog": (138.0, 2.2)}
+    cadence, speed = defaults[args.gait]
+    height, bmi, sex, actor_id, seed, extra = args.height, args.bmi, args.sex, "cli", args.seed or 0, {}
+    if args.protocol:
+        from stimuli.protocol import load_protocol
+        proto = load_protocol(args.protocol)
+        gait = proto.gaits.get(args.gait)
+        if gait is None:
+            raise StimuliError(f"{args.protocol}: no gait {args.gait!r} in gaits ({', '.join(proto.gaits)})")
+        cadence, speed = gait.cadence_spm, gait.speed_mps
+        seed = proto.seed if args.seed is None else args.seed
+        if args.actor:
+            found = [a for a in proto.actors if a.id == args.actor]
+            if not found:
+                raise StimuliError(f"{args.protocol}: no actor {args.actor!r}; actors are "
+                                   f"{', '.join(a.id for a in proto.actors)}")
+            a = found[0]
+            height, bmi, sex, actor_id = a.height_m, a.bmi, a.sex, a.id
+            extra = {k: getattr(a, k) for k in ("waist_m", "hip_m", "chest_m", "body_fat_pct") if getattr(a, k, None)}
+    cadence = args.cadence or cadence
+    speed = args.speed or speed
+    params = params_for_actor(actor_id, height, bmi if bmi is not None else 22.0, sex, args.gait, cadence, speed,
+                              seed=seed, style=not args.no_style, **extra)
+    m = generate(params, height, fps=args.fps, cycles=args.cycles)
+    m.metadata.update(actor_id=actor_id, sex=sex, bmi=bmi)
+    print(m.save(args.out))
+    if args.bvh:
+        print(write_bvh(m, args.bvh))
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from stimuli.motion.loop import make_loop
+
+    src = args.source
+    if src.suffix.lower() == ".bvh":
+        from stimuli.motion.bvh import read_bvh
+        m = read_bvh(src, mapping=args.mapping, height_m=args.height)
+    elif src.suffix.lower() == ".npz":
+        from stimuli.motion.amass import read_amass
+        m = read_amass(src, height_m=args.height)
+    else:
+        raise StimuliError(f"{src}: unknown motion format (expected .bvh or an AMASS .npz)")
+    if args.loop:
+        m = make_loop(m, cycles=args.cycles)
+    if args.fps:
+        looped = m.metadata.get("looped")
+        m = m.resample(args.fps)
+        m.metadata["looped"] = bool(looped)
+    print(m.save(args.out))
+    return 0
+
+
+def run_average(args: argparse.Namespace) -> int:
+    from stimuli.motion.average import average_motion
+
+    avg = average_motion([_load(p) for p in args.motions], cycles=args.cycles)
+    print(avg.save(args.out))
+    return 0
+
+
+def run_modify(args: argparse.Namespace) -> int:
+    from stimuli.motion.modifier import modify
+
+    m = modify(_load(args.motion), args.height, args.body_fat, args.chest, args.wthr, base_scale=args.base_scale)
+    print(json.dumps(m.metadata["modifier"], indent=2))
+    print(m.save(args.out))
+    return 0
+
+
+def run_metrics(args: argparse.Namespace) -> int:
+    from stimuli.motion.quality import motion_quality
+
+    m = _load(args.motion)
+    q = motion_quality(m, _fit(args.body) if args.body else None)
+    text = json.dumps(q, indent=2, sort_keys=True)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(text + "\n")
+    print(text)
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from stimuli.motion.bvh import write_bvh
+
+    print(write_bvh(_load(args.motion), args.out, order=args.order, scale=args.scale))
+    return 0
+
+
+def run_retarget(args: argparse.Namespace) -> int:
+    from stimuli.motion.retarget import retarget
+
+    print(retarget(_load(args.motion), _fit(args.body), keep_speed=args.keep_speed).save(args.out))
+    return 0
+
+
+def run_markers(args: argparse.Namespace) -> int:
+    from stimuli.motion.markers import write_markers_csv
+
+    print(write_markers_csv(_load(args.motion), args.out))
+    return 0
+
+
+def run_strip(args: argparse.Namespace) -> int:
+    from stimuli.motion.strip import frame_strip
+
+    print(frame_strip({p.stem: _load(p) for p in args.motions}, args.out, n=args.frames))
+    return 0

@@ -1,0 +1,58 @@
+"""Frame strips: several poses across one gait cycle, side view, for checking motions by eye.
+
+Draws the 15 point-light markers joined as a stick figure (matplotlib, no OpenGL needed) for
+``n`` evenly spaced frames of the first cycle, ground line at y = 0, feet in contact marked.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from stimuli.motion.markers import MARKERS, marker_trajectories
+
+BONES = [("hips", "l_upper_leg"), ("hips", "r_upper_leg"), ("l_upper_leg", "l_knee"), ("r_upper_leg", "r_knee"),
+         ("l_knee", "l_heel"), ("r_knee", "r_heel"), ("hips", "torso"), ("torso", "head"),
+         ("torso", "l_shoulder"), ("torso", "r_shoulder"), ("l_shoulder", "l_elbow"), ("r_shoulder", "r_elbow"),
+         ("l_elbow", "l_wrist"), ("r_elbow", "r_wrist")]
+
+
+def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, points: dict | None = None) -> Path:
+    """One row per motion (label → Motion), ``n`` poses of its first cycle, side view (z → right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = len(motions)
+    fig, axes = plt.subplots(rows, n, figsize=(1.4 * n, 2.4 * rows), squeeze=False)
+    idx = {m: i for i, m in enumerate(MARKERS)}
+    for r, (label, motion) in enumerate(motions.items()):
+        tr = marker_trajectories(motion, (points or {}).get(label))
+        cycles = int(motion.metadata.get("cycles", 1)) or 1
+        frames = np.linspace(0, motion.n_frames / cycles, n, endpoint=False).astype(int)
+        for c, f in enumerate(frames):
+            ax = axes[r, c]
+            p = tr[f]
+            for a, b in BONES:
+                color = "tab:blue" if a.startswith("l_") or b.startswith("l_") else \
+                    "tab:red" if a.startswith("r_") or b.startswith("r_") else "k"
+                ax.plot([p[idx[a], 2], p[idx[b], 2]], [p[idx[a], 1], p[idx[b], 1]], color=color, lw=1.5)
+            ax.scatter(p[:, 2], p[:, 1], s=6, c="k", zorder=3)
+            for s, col in (("l", "tab:blue"), ("r", "tab:red")):
+                if p[idx[f"{s}_heel"], 1] < 0.05:
+                    ax.plot(p[idx[f"{s}_heel"], 2], 0.0, marker="^", color=col, ms=5)
+            ax.axhline(0.0, color="0.5", lw=0.8)
+            ax.set_xlim(p[idx["hips"], 2] - 0.8, p[idx["hips"], 2] + 0.8)
+            ax.set_ylim(-0.05, 2.0)
+            ax.set_aspect("equal")
+            ax.axis("off")
+            ax.set_title(f"{label} {100 * (f % max(motion.n_frames // cycles, 1)) / max(motion.n_frames // cycles, 1):.0f}%",
+                         fontsize=6)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
