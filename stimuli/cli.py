@@ -23,6 +23,7 @@ COMMAND_MODULES = [
     "analysis.commands",
     "analysis.commands_report",
     "stimuli.commands.bodies_cmd",
+    "stimuli.commands.motion_cmd",
     "stimuli.commands.survey_cmd",
     "stimuli.commands.physics_cmd",
     "stimuli.commands.render_cmd",
