@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import sys
 import tempfile
 import time
@@ -24,8 +25,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def clip_fps(n_bodies: int, width: int, height: int, seconds: float = 2.0, fps: int = 30) -> tuple[float, float]:
-    """(wall-clock fps, CPU ms per frame) of one clip with ``n_bodies`` on treadmills, encoded to MP4."""
+def children_cpu() -> float:
+    """CPU seconds of finished child processes (ffmpeg, pool workers and their ffmpegs)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def clip_fps(n_bodies: int, width: int, height: int, seconds: float = 2.0, fps: int = 30):
+    """(wall-clock fps, CPU ms per frame here, CPU ms per frame in ffmpeg) of one clip, encoded to MP4."""
     from stimuli.bodies import fit_body
     from stimuli.render.clip import Figure, Look, render_frames
     from stimuli.render.procedural import stepping_pose
@@ -39,21 +46,22 @@ def clip_fps(n_bodies: int, width: int, height: int, seconds: float = 2.0, fps: 
     figures = [Figure(body, rot, root, 1.2) for _ in range(n_bodies)]
     with tempfile.TemporaryDirectory() as tmp:
         write_video(render_frames(look, figures), Path(tmp) / "warm.mp4", fps, width, height, look.n_frames)
-        wall, cpu = time.perf_counter(), time.process_time()
+        wall, cpu, enc = time.perf_counter(), time.process_time(), children_cpu()
         write_video(render_frames(look, figures), Path(tmp) / "clip.mp4", fps, width, height, look.n_frames)
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    return look.n_frames / wall, 1000 * cpu / look.n_frames
+        wall, cpu, enc = time.perf_counter() - wall, time.process_time() - cpu, children_cpu() - enc
+    return look.n_frames / wall, 1000 * cpu / look.n_frames, 1000 * enc / look.n_frames
 
 
-def exp1_set(poses: str, workers: int) -> tuple[float, int]:
-    """Seconds for the whole Exp-1 set at the protocol's settings, and the number of clips."""
+def exp1_set(poses: str, workers: int) -> tuple[float, int, float]:
+    """Wall seconds for the whole Exp-1 set at the protocol's settings, clips, CPU seconds (all processes)."""
     from stimuli.render.pipeline import render_protocol
 
     with tempfile.TemporaryDirectory() as tmp:
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time() + children_cpu()
         report = render_protocol(ROOT / "protocols" / "exp1_shape_motion.yaml", tmp, workers=workers,
                                  source=poses, progress=True, sheet=False)
-        return time.perf_counter() - start, len(report.rendered)
+        cpu = time.process_time() + children_cpu() - cpu
+        return time.perf_counter() - start, len(report.rendered), cpu
 
 
 def main() -> None:
@@ -67,15 +75,17 @@ def main() -> None:
     renderer(64, 64)
     print(f"OpenGL device: {device_name()}   PYOPENGL_PLATFORM={os.environ.get('PYOPENGL_PLATFORM')}   "
           f"CPU cores: {os.cpu_count()}   load average: {os.getloadavg()[0]:.1f}")
-    print(f"{'bodies':>6} {'resolution':>11} {'fps (wall)':>11} {'CPU ms/frame':>13}")
+    print(f"{'bodies':>6} {'resolution':>11} {'fps (wall)':>11} {'CPU ms/frame':>13} {'+ ffmpeg ms':>12}")
     for n in (1, 2):
         for w, h in ((640, 360), (1280, 720)):
-            fps, cpu_ms = clip_fps(n, w, h)
-            print(f"{n:>6} {f'{w}x{h}':>11} {fps:>11.1f} {cpu_ms:>13.1f}")
+            fps, cpu_ms, enc_ms = clip_fps(n, w, h)
+            print(f"{n:>6} {f'{w}x{h}':>11} {fps:>11.1f} {cpu_ms:>13.1f} {enc_ms:>12.1f}")
     if not args.no_set:
-        seconds, clips = exp1_set(args.poses, args.workers)
-        print(f"Exp-1 set: {clips} clips (4 s, 30 fps, 1280x720) in {seconds:.0f} s "
-              f"({seconds / 60:.1f} min) with {args.workers} workers")
+        seconds, clips, cpu = exp1_set(args.poses, args.workers)
+        cores = min(args.workers, os.cpu_count() or 1)
+        print(f"Exp-1 set: {clips} clips (4 s, 30 fps, 1280x720) in {seconds:.0f} s ({seconds / 60:.1f} min) "
+              f"with {args.workers} workers; {cpu:.0f} CPU s in all processes = {cpu / cores / 60:.1f} min "
+              f"on {cores} otherwise idle cores; load average now {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

@@ -107,6 +107,8 @@ def render_frames(look: Look, figures: list[Figure]):
 
     if look.layout not in LAYOUTS:
         raise ValueError(f"unknown layout {look.layout!r}")
+    if not figures:
+        raise ValueError("a clip needs at least one figure")
     n = look.n_frames
     for f in figures:
         if len(f.rotations) != n or len(f.root_translation) != n:

@@ -9,7 +9,7 @@ import numpy as np
 from stimuli.errors import StimuliError
 from stimuli.render.clip import Figure, Look, render_frames
 from stimuli.render.settings import parse_resolution
-from stimuli.render.sources import MissingSource, fit_loop
+from stimuli.render.sources import fit_loop, on_rig
 from stimuli.render.video import write_video
 
 
@@ -61,16 +61,18 @@ def _poses(args, body, look: Look):
 
         rot, root = stepping_pose(body, look.n_frames, cycles=max(1, int(round(look.duration_s))))
         return rot, root, float(args.speed or 0.0)
-    if args.gait:
-        raise MissingSource(f"--gait {args.gait}: generated gaits need retargeting onto the Anny rig "
-                            "(stimuli.motion), which is not available to the renderer yet; use --motion or --stepping")
     from stimuli.motion import Motion
 
-    motion = Motion.load(args.motion)
-    if motion.joint_names != list(body.rig.names):
-        raise StimuliError(f"{args.motion}: the motion's skeleton ({len(motion.joint_names)} joints, e.g. "
-                           f"{motion.joint_names[:3]}) is not the Anny rig ({body.rig.n_bones} bones); "
-                           "retarget it onto the body first")
+    if args.gait:
+        from stimuli.motion.generate import GaitParams, generate
+
+        cadence = 112.0 if args.gait == "walk" else 138.0
+        cycles = max(1, int(round(look.duration_s * cadence / 120.0)))
+        params = GaitParams(gait=args.gait, cadence_spm=cadence, speed_mps=1.2 if args.gait == "walk" else 2.2)
+        motion = generate(params, height_m=body.anthropometry.height_m, fps=float(look.fps), cycles=cycles)
+    else:
+        motion = Motion.load(args.motion)
+    motion = on_rig(motion, body)    # MissingSource until retargeting onto the Anny rig exists
     rot, root, scale = fit_loop(motion.rotations, motion.root_translation, motion.fps, look.n_frames, look.fps)
     speed = args.speed if args.speed is not None else float(motion.metadata.get("belt_speed_mps", 0.0)) * scale
     return rot, root, float(np.asarray(speed))

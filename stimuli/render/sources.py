@@ -69,10 +69,10 @@ def body_of(protocol, actor_id: str):
 
 
 def gait_of(protocol, stimulus) -> str:
+    """The stimulus's gait level; stimuli without one (familiarization) use the first declared gait."""
     factor = protocol.factor_mapped_to("gait")
-    if factor is None:
-        return "walk"
-    return stimulus.levels[factor.name]
+    level = stimulus.levels.get(factor.name) if factor else None
+    return level or next(iter(protocol.gaits), "walk")
 
 
 def protocol_figures(protocol, stimulus, look: Look, motions_dir=None) -> list[Figure]:
@@ -81,6 +81,8 @@ def protocol_figures(protocol, stimulus, look: Look, motions_dir=None) -> list[F
     alternatives = protocol.factors_with_role("alternatives")
     if alternatives:
         kind = alternatives[0].maps_to
+        if not stimulus.arrangement:  # familiarization: the body alone, moving with the first alternative
+            return [_alternative_figure(protocol, stimulus, look, kind, alternatives[0].levels[0], "", motions_dir)]
         return [_alternative_figure(protocol, stimulus, look, kind, level, label, motions_dir)
                 for level, label in zip(stimulus.arrangement, _labels(protocol, len(stimulus.arrangement)))]
     if layout not in ("treadmill", "point_light"):
