@@ -1,0 +1,78 @@
+"""The ``shapemotion motion`` commands: files written, user errors → exit code 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stimuli.cli import main
+from stimuli.commands.motion_cmd import parse_body
+from stimuli.errors import StimuliError
+from stimuli.motion import Motion
+from stimuli.motion.markers import MARKERS
+
+ROOT = Path(__file__).resolve().parents[1]
+WALK = ROOT / "stimuli" / "data" / "cmu_35_01_walk.bvh"
+
+
+def test_generate_import_average_modify_metrics_export(tmp_path, capsys):
+    w = tmp_path / "w.npz"
+    assert main(["motion", "generate", "--gait", "jog", "--protocol", str(ROOT / "protocols" / "exp1_shape_motion.yaml"),
+                 "--actor", "M_Hi2", "--out", str(w), "--bvh", str(tmp_path / "w.bvh")]) == 0
+    m = Motion.load(w)
+    assert m.metadata["gait"] == "jog" and m.metadata["actor_id"] == "M_Hi2"
+    assert abs(m.metadata["cadence_spm"] - 138) <= 1 and m.metadata["speed_mps"] == 2.2
+    assert main(["motion", "import", str(WALK), "--loop", "--cycles", "2", "--fps", "30",
+                 "--out", str(tmp_path / "c.npz")]) == 0
+    c = Motion.load(tmp_path / "c.npz")
+    assert c.fps == 30 and c.metadata["looped"] and c.metadata["treadmill"]
+    w2 = tmp_path / "w2.npz"
+    assert main(["motion", "generate", "--height", "1.7", "--bmi", "31", "--seed", "3", "--out", str(w2)]) == 0
+    assert main(["motion", "generate", "--height", "1.8", "--bmi", "21", "--seed", "4", "--out", str(tmp_path / "w3.npz")]) == 0
+    assert main(["motion", "average", str(w2), str(tmp_path / "w3.npz"), "--out", str(tmp_path / "a.npz")]) == 0
+    assert Motion.load(tmp_path / "a.npz").metadata["n_motions"] == 2
+    assert main(["motion", "modify", str(w2), "--height", "1.83", "--body-fat", "34.1",
+                 "--out", str(tmp_path / "mod.npz")]) == 0
+    assert Motion.load(tmp_path / "mod.npz").metadata["modifier"]["swing_ratio"] == pytest.approx(1.286497, abs=1e-6)
+    assert main(["motion", "metrics", str(w), "--json", str(tmp_path / "m.json")]) == 0
+    metrics = json.loads((tmp_path / "m.json").read_text())
+    assert metrics["flight_pct"] > 0 and metrics["skate_pct"] <= 5
+    assert main(["motion", "export-bvh", str(tmp_path / "c.npz"), "--out", str(tmp_path / "c.bvh")]) == 0
+    from stimuli.motion.bvh import read_bvh
+    back = read_bvh(tmp_path / "c.bvh")
+    assert np.allclose(back.positions(), c.positions(), atol=2e-4)
+    assert main(["motion", "markers", str(w), "--out", str(tmp_path / "mk.csv")]) == 0
+    import pandas as pd
+    mk = pd.read_csv(tmp_path / "mk.csv")
+    assert len(mk) == m.n_frames * 15 and set(mk["marker"]) == set(MARKERS)
+    assert main(["motion", "strip", str(w), str(tmp_path / "c.npz"), "--out", str(tmp_path / "s.png")]) == 0
+    assert (tmp_path / "s.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args,msg", [
+    (["motion", "import", "{bad}", "--out", "{out}"], "not a readable BVH"),
+    (["motion", "import", "{short}", "--loop", "--out", "{out}"], "fewer than one whole gait cycle"),
+    (["motion", "metrics", "{missing}"], "not found"),
+    (["motion", "generate", "--cadence", "5", "--out", "{out}"], "cadence_spm"),
+])
+def test_user_errors_exit_2(tmp_path, capsys, args, msg):
+    (tmp_path / "bad.bvh").write_text("nonsense")
+    lines = WALK.read_text().splitlines()
+    head = lines[:lines.index("MOTION")]
+    frames = lines[lines.index("MOTION") + 3:][:40]
+    (tmp_path / "short.bvh").write_text("\n".join(head + ["MOTION", "Frames: 40", "Frame Time: .0083333"] + frames) + "\n")
+    subs = {"{bad}": str(tmp_path / "bad.bvh"), "{short}": str(tmp_path / "short.bvh"),
+            "{missing}": str(tmp_path / "none.npz"), "{out}": str(tmp_path / "o.npz")}
+    assert main([subs.get(a, a) for a in args]) == 2
+    assert msg in capsys.readouterr().err.replace("\n  ", " ")
+
+
+def test_parse_body():
+    assert parse_body("sex=m,height=1.8,bmi=25") == {"sex": "M", "height_m": 1.8, "bmi": 25.0}
+    with pytest.raises(StimuliError, match="missing bmi"):
+        parse_body("sex=M,height=1.8")
+    with pytest.raises(StimuliError, match="unknown key"):
+        parse_body("sex=M,height=1.8,bmi=2,age=3")
