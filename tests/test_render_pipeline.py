@@ -146,8 +146,7 @@ def test_ctrl_c_leaves_no_half_files_and_the_rerun_resumes(short_protocol, tmp_p
 
 @pytest.mark.slow
 def test_exp1_end_to_end_with_real_motions(short_protocol, tmp_path):
-    """Exp 1 from the protocol's own motions (generator → retarget onto each body) once they exist."""
-    pytest.importorskip("stimuli.motion.retarget", reason="motion retargeting onto the Anny rig not available yet")
+    """Exp 1 from the protocol's own motions (generator → retarget onto each body)."""
     from stimuli.render.video import read_video
 
     out = tmp_path / "exp1"

@@ -149,14 +149,9 @@ def on_rig(motion, body):
     """``motion`` on ``body``'s own Anny rig (unchanged when it is on that rig already)."""
     if list(motion.joint_names) == list(body.rig.names):
         return motion
-    try:
-        from stimuli.motion.retarget import retarget_to_body
-    except ImportError:
-        raise MissingSource(
-            f"a {motion.metadata.get('source', 'generated')} motion on the {len(motion.joint_names)}-joint "
-            f"skeleton must be retargeted onto the Anny rig of body {body.body_id}; that step "
-            "(stimuli.motion.retarget.retarget_to_body) is not available yet") from None
-    return retarget_to_body(motion, body)
+    from stimuli.motion.retarget import retarget
+
+    return retarget(motion, body)
 
 
 def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, motions_dir=None):
