@@ -83,9 +83,11 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_markers)
 
     p = sub.add_parser("strip", help="a frame strip (poses across one cycle, side view) as PNG")
-    p.add_argument("motions", type=Path, nargs="+")
+    p.add_argument("motions", type=Path, nargs="*", help="motion files (or use --protocol)")
+    p.add_argument("--protocol", type=Path, help="strips of every actor's generated walk and jog on its body")
+    p.add_argument("--skeleton-only", action="store_true", help="with --protocol: do not retarget onto bodies")
     p.add_argument("--frames", type=int, default=8)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True, help="PNG file (or folder with --protocol)")
     p.set_defaults(func=run_strip)
 
 
@@ -241,5 +243,12 @@ def run_markers(args: argparse.Namespace) -> int:
 def run_strip(args: argparse.Namespace) -> int:
     from stimuli.motion.strip import frame_strip
 
+    if args.protocol:
+        from stimuli.motion.strip import protocol_strips
+        for path in protocol_strips(args.protocol, args.out, args.frames, on_bodies=not args.skeleton_only):
+            print(path)
+        return 0
+    if not args.motions:
+        raise StimuliError("motion strip: give motion files or --protocol")
     print(frame_strip({p.stem: _load(p) for p in args.motions}, args.out, n=args.frames))
     return 0

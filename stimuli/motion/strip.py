@@ -56,3 +56,32 @@ def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, points
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def protocol_strips(protocol_path: str | Path, out_dir: str | Path, frames: int = 8, on_bodies: bool = True) -> list[Path]:
+    """A strip per actor and gait of a protocol (generated motion, retargeted onto the actor's
+    fitted Anny body when ``on_bodies``), plus one overview per gait with every actor."""
+    from stimuli.motion.generate import generate
+    from stimuli.motion.style import params_for_actor
+    from stimuli.protocol import load_protocol
+
+    proto = load_protocol(protocol_path)
+    out_dir = Path(out_dir)
+    written = []
+    for gait, spec in proto.gaits.items():
+        rows, pts = {}, {}
+        for a in proto.actors:
+            extra = {k: getattr(a, k) for k in ("waist_m", "hip_m", "chest_m", "body_fat_pct") if getattr(a, k, None)}
+            m = generate(params_for_actor(a.id, a.height_m, a.bmi, a.sex, gait, spec.cadence_spm, spec.speed_mps,
+                                          seed=proto.seed, **extra), a.height_m)
+            label = f"{a.id} {gait}"
+            if on_bodies:
+                from stimuli.bodies import body_for_actor
+                from stimuli.motion.retarget import mesh_sole_points, retarget
+                body = body_for_actor(a)
+                m = retarget(m, body)
+                pts[label] = mesh_sole_points(body)
+            rows[label] = m
+            written.append(frame_strip({label: m}, out_dir / f"strip_{a.id}_{gait}.png", frames, pts))
+        written.append(frame_strip(rows, out_dir / f"strips_{gait}.png", frames, pts))
+    return written
