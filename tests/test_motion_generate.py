@@ -169,3 +169,21 @@ def test_knee_angles_in_the_rest_pose_and_bent():
     assert np.allclose(knee_angles(m)["l"], expected, atol=1e-6)
     m.rotations[:, m.index("l_knee")] = quat.from_axis_angle(np.array([np.radians(40.0), 0, 0]))
     assert np.allclose(knee_angles(m)["l"], 40.0 + expected, atol=0.2)
+
+
+def test_thesis_modifier_on_a_t_pose_capture():
+    """The arm curves are measured from the rig's own rest direction, so a T-pose CMU capture works too."""
+    m = trim_cycles(read_bvh(ROOT / "stimuli" / "data" / "cmu_35_01_walk.bvh"), 2).resample(30)
+    out = modify(m, 1.83, 34.1, base_scale=0.1)
+    p = out.metadata["modifier"]
+
+    def arm(mm):
+        j = mm.index("LeftArm")
+        rest = mm.rest_positions()
+        d0 = rest[mm.index("LeftForeArm")] - rest[j]
+        d = quat.rotate(mm.rotations[:, j], d0 / np.linalg.norm(d0))
+        return np.degrees(np.arctan2(d[:, 2], -d[:, 1])), np.degrees(np.arctan2(d[:, 0], -d[:, 1]))
+
+    (f0, a0), (f1, a1) = arm(m), arm(out)
+    assert np.ptp(f1) / np.ptp(f0) == pytest.approx(p["swing_ratio"], rel=0.03)
+    assert a1.mean() - a0.mean() == pytest.approx(p["abduction_offset_deg"], abs=0.5)

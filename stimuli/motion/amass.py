@@ -9,7 +9,7 @@ AMASS worlds are z-up; the motion is turned to the project's y-up frame.
 
 Examples
 --------
->>> len(SMPL_JOINTS), SMPL_PARENTS[4]
+>>> len(SMPL_JOINTS), int(SMPL_PARENTS[4])
 (22, 1)
 """
 

@@ -56,17 +56,19 @@ def thesis_parameters(height_m: float, body_fat_pct: float, chest_m: float | Non
             "swing_ratio": swing / LEAN["swing"], "height_scale": height_m / LEAN["height"]}
 
 
-def _arm_angles(rot_local: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
-    """Abduction and flexion (rad) of an upper arm from its local rotation (arm hangs along −y)."""
-    d = quat.rotate(rot_local, np.array([0.0, -1.0, 0.0]))
+def _arm_angles(rot_local: np.ndarray, sign: float, rest_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Abduction and flexion (rad) of an upper arm in its parent's rest-aligned frame, from its
+    local rotation and its rest direction (any rest pose: arms down, A-pose or T-pose)."""
+    d = quat.rotate(rot_local, rest_dir)
     abd = np.arctan2(sign * d[:, 0], -d[:, 1])
     flex = np.arctan2(d[:, 2], -d[:, 1])
     return abd, flex
 
 
-def _scale_arm(rot: np.ndarray, j: int, sign: float, bob: float, swing: float, offset_rad: float) -> None:
+def _scale_arm(rot: np.ndarray, j: int, sign: float, bob: float, swing: float, offset_rad: float,
+               rest_dir: np.ndarray) -> None:
     """Scale the abduction (bob) and flexion (swing) curves of one upper arm about their means."""
-    abd, flex = _arm_angles(rot[:, j], sign)
+    abd, flex = _arm_angles(rot[:, j], sign, rest_dir)
     d_abd = (abd - abd.mean()) * (bob - 1.0) + offset_rad
     d_flex = (flex - flex.mean()) * (swing - 1.0)
     # Pre-multiplying turns the arm about the parent's (rest-aligned) axes.
@@ -100,10 +102,12 @@ def modify(motion: Motion, height_m: float, body_fat_pct: float, chest_m: float 
         k = p["height_scale"]
         m = m.replace(offsets=m.offsets * k, root_translation=m.root_translation * k)
     rot = m.rotations.copy()
+    rest = m.rest_positions()
     for s, sign in (("l", 1.0), ("r", -1.0)):
-        if f"{s}_shoulder" in roles:
+        if f"{s}_shoulder" in roles and f"{s}_elbow" in roles:
+            arm = rest[roles[f"{s}_elbow"]] - rest[roles[f"{s}_shoulder"]]
             _scale_arm(rot, roles[f"{s}_shoulder"], sign, p["bob_ratio"], p["swing_ratio"],
-                       np.radians(p["abduction_offset_deg"]))
+                       np.radians(p["abduction_offset_deg"]), arm / np.linalg.norm(arm))
     rot = _widen_base(m, rot, p["base_offset_cm"] / 100.0 * base_scale)
     m = m.replace(rotations=rot)
     if abs(p["speed_ratio"] - 1.0) > 1e-12:
