@@ -173,7 +173,7 @@ def test_knee_angles_in_the_rest_pose_and_bent():
 
 def test_thesis_modifier_on_a_t_pose_capture():
     """The arm curves are measured from the rig's own rest direction, so a T-pose CMU capture works too."""
-    m = trim_cycles(read_bvh(ROOT / "stimuli" / "data" / "cmu_35_01_walk.bvh"), 2).resample(30)
+    m = trim_cycles(read_bvh(ROOT / "stimuli" / "data" / "cmu_35_01_walk.bvh"), 1).resample(30)
     out = modify(m, 1.83, 34.1, base_scale=0.1)
     p = out.metadata["modifier"]
 
