@@ -253,3 +253,16 @@ def test_loops_are_seamless(path):
     raw = raw.slice(0, raw.n_frames - 1)
     raw.metadata["looped"] = True
     assert seam_error(raw)["seam_accel_m"] > err["seam_accel_m"]
+
+
+def test_smplx_layout_and_frame_rate_key(tmp_path):
+    """SMPL-X files: 165 pose values (body first) and ``mocap_frame_rate``."""
+    poses = np.zeros((4, 165))
+    poses[:, :3] = [np.pi / 2, 0, 0]
+    poses[:, 66:] = 9.0  # jaw, eyes, hands: ignored
+    np.savez(tmp_path / "x.npz", poses=poses, trans=np.zeros((4, 3)), mocap_frame_rate=np.float64(120.0))
+    m = read_amass(tmp_path / "x.npz")
+    assert m.fps == 120.0 and m.n_joints == 22
+    p = m.positions()[0]
+    # Standing upright in y-up: head above pelvis above ankles.
+    assert p[SMPL_JOINTS.index("head"), 1] > p[0, 1] > p[SMPL_JOINTS.index("left_ankle"), 1]
