@@ -48,10 +48,11 @@ def heel_strikes(sim, side: int = 0, min_gap_s: float = 0.4) -> np.ndarray:
     c = sim.foot_contact[:, side].astype(int)
     onsets = np.flatnonzero(np.diff(c) == 1) + 1
     times, last = [], -np.inf
+    window = max(1, int(round(0.02 / (sim.step_times[1] - sim.step_times[0])))) if len(sim.step_times) > 1 else 1
     for i in onsets:
         t = sim.step_times[i]
-        # A contact must have lasted a while and the swing before it too (no flicker).
-        if t - last >= min_gap_s and c[i:i + 20].mean() > 0.8:
+        # A contact must last 20 ms and the swing before it a while too (no flicker).
+        if t - last >= min_gap_s and c[i:i + window].mean() > 0.8:
             times.append(t)
             last = t
     return np.array(times)

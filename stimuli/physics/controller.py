@@ -104,17 +104,50 @@ def set_joint_gains(model, kp: dict[str, float], kd: dict[str, float]) -> None:
         model.actuator_biasprm[a, 2] = -kd[name]
 
 
-def root_wrench(gains: Gains, pos, vel, quat_wxyz, omega_world, target: dict, i: int) -> np.ndarray:
+def set_root_damping(model, gains: Gains) -> None:
+    """The velocity terms ``−k_df v`` and ``−k_dr ω`` of the root wrench as the free joint's damping.
+
+    MuJoCo's implicitfast integrator treats DoF damping implicitly; applied explicitly through
+    ``xfrc_applied`` (first version) the root's ``k_dr`` sat near the explicit stability limit
+    of the light pelvis at a 1-ms step, and the chattering root pumped the ragdoll into hopping
+    (about a third of each walk with no foot on the floor). The reference-velocity parts
+    ``k_df v̄`` and ``k_dr ω̄`` do not depend on the state and stay in :func:`root_wrench`. The
+    damping is isotropic, so the free joint's local angular velocity gives the same torque as
+    the world one.
+    """
+    if model.jnt_type[0] != 0 or model.jnt_dofadr[0] != 0:  # mjJNT_FREE at DoF 0: the pelvis root
+        raise ValueError("the ragdoll's first joint must be the free root joint")
+    model.dof_damping[0:3] = gains.k_df
+    model.dof_damping[3:6] = gains.k_dr
+
+
+def apply_root_wrench(data, gains: Gains, target: dict, i: int, pelvis: int) -> None:
+    """Write the root wrench into the free joint's generalised forces (``qfrc_applied[:6]``).
+
+    A free joint's translational DoFs are the body origin's world position, so their generalised
+    force is a world force at the origin — where the PD measures the position and where the
+    implicit damping ``−k_df v`` acts; its rotational DoFs take the torque in the body frame.
+    (``xfrc_applied`` would put the force at the segment's CoM, a few cm away: with the damping at
+    the origin that leaves a spurious couple of about k_df·v̄·r ≈ 50 N·m.)
+    """
+    wrench = root_wrench(gains, data.qpos[:3], data.qpos[3:7], target, i)
+    data.qfrc_applied[0:3] = wrench[:3]
+    data.qfrc_applied[3:6] = data.xmat[pelvis].reshape(3, 3).T @ wrench[3:]
+
+
+def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarray:
     """World force and torque (6,) on the pelvis for step ``i`` of the sampled targets.
 
-    Uses MuJoCo's quaternion helpers: this runs every simulation step, scipy's are 20× slower.
+    ``k_pf (p̄ − p) + k_df v̄`` and ``k_pr θ(R̄ Rᵀ) + k_dr ω̄``; the ``−k_df v``, ``−k_dr ω`` terms
+    act through the free joint's implicit damping (:func:`set_root_damping`). Uses MuJoCo's
+    quaternion helpers: this runs every simulation step, scipy's are 20× slower.
     """
     import mujoco
 
-    force = gains.k_pf * (target["root_pos"][i] - pos) + gains.k_df * (target["root_vel"][i] - vel)
+    force = gains.k_pf * (target["root_pos"][i] - pos) + gains.k_df * target["root_vel"][i]
     inv, err_q, err = np.empty(4), np.empty(4), np.empty(3)
     mujoco.mju_negQuat(inv, quat_wxyz)
     mujoco.mju_mulQuat(err_q, target["root_quat"][i], inv)
     mujoco.mju_quat2Vel(err, err_q, 1.0)
-    torque = gains.k_pr * err + gains.k_dr * (target["root_omega"][i] - omega_world)
+    torque = gains.k_pr * err + gains.k_dr * target["root_omega"][i]
     return np.concatenate([force, torque])

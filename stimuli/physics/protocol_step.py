@@ -22,7 +22,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-6"
+CODE_VERSION = "physics-7"
 
 
 def cache_dir() -> Path:

@@ -21,7 +21,7 @@ from stimuli.physics.controller import Gains, set_joint_gains
 from stimuli.physics.output import joint_rms_difference, to_motion
 from stimuli.physics.ragdoll import build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
-from stimuli.physics.simulate import simulate
+from stimuli.physics.simulate import DEFAULT_RATE_HZ, simulate
 
 
 class RagdollFellError(StimuliError):
@@ -37,7 +37,8 @@ class RetargetResult:
     ragdoll: object
 
 
-def prepare(motion, body, weight_kg: float | None = None, gains: Gains | None = None, rate_hz: float = 1000.0):
+def prepare(motion, body, weight_kg: float | None = None, gains: Gains | None = None,
+            rate_hz: float = DEFAULT_RATE_HZ):
     """Reference targets, ragdoll and compiled model with the fixed gains (no simulation yet)."""
     gains = gains or Gains.load()
     ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, weight_kg, axes))
@@ -115,7 +116,7 @@ def _body_row(body, weight_kg: float) -> dict:
 
 
 def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
-             min_simulated_s: float = 4.0, rate_hz: float = 1000.0, raise_on_fall: bool = False) -> RetargetResult:
+             min_simulated_s: float = 4.0, rate_hz: float = DEFAULT_RATE_HZ, raise_on_fall: bool = False) -> RetargetResult:
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the

@@ -3,7 +3,9 @@
 The paper minimised the squared difference between ragdoll and reference joint angles for its
 base character and then fixed the gains for every body. Stiffer is always more accurate, so the
 search is two-stage: (1) the smallest joint stiffness ``k_p`` on a √2 grid whose tracking RMS
-error is within ``target_rms_deg`` (at the damping bound ζ = 0.5, ``k_d = √k_p``); (2) a short bounded
+error is within ``target_rms_deg`` (at the damping bound ζ = 0.5, ``k_d = √k_p``) — by default the
+acceptance bound of 3°: tracking better than required only stiffens the controller, and a stiff
+controller moves every body alike; (2) a short bounded
 Nelder–Mead search over the damping and the root force gains (log scale) minimising the tracking
 error at that stiffness. Damping stays within 0.5–1.5 × critical: with the paper's ``−k_d q̇``
 less damping always tracks better (no lag) until the simulation blows up, and the gains must stay
@@ -77,7 +79,7 @@ def root_gains(mass_kg: float, freq_hz: float = ROOT_FREQ_HZ) -> tuple[float, fl
     return mass_kg * omega**2, 2 * mass_kg * omega
 
 
-def tune(base: dict = BASE, target_rms_deg: float = 2.5, max_evals: int = 12, out: Path | None = GAINS_FILE,
+def tune(base: dict = BASE, target_rms_deg: float = 3.0, max_evals: int = 12, out: Path | None = GAINS_FILE,
          progress=print) -> Gains:
     """Run the two-stage search and (optionally) write ``gains.json``."""
     body, motion = base_setup(base)
