@@ -156,3 +156,17 @@ def test_exp1_end_to_end_with_real_motions(short_protocol, tmp_path):
     frames, _ = read_video(out / _manifest(out)[0]["file"])
     body = (np.abs(frames.astype(int) - 158).max(axis=-1) < 40).sum(axis=(1, 2))
     assert body.min() > 500 and np.abs(np.diff(frames.astype(int), axis=0)).mean() > 0.1
+
+
+def test_preview_writes_one_clip_and_its_poster(tmp_path, run_cli):
+    from stimuli.render.video import read_video
+
+    out = tmp_path / "p.mp4"
+    code, stdout, err = run_cli("preview", "--stepping", "--body", "sex=M,height=1.8,bmi=25", "--out", out,
+                                "--resolution", "160x90", "--fps", "12", "--duration", "1", "--layout", "point_light")
+    assert code == 0, err
+    frames, meta = read_video(out)
+    assert frames.shape == (12, 90, 160, 3) and meta["fps"] == 12 and out.with_suffix(".png").exists()
+    assert frames.mean() < 30, "point-light: dots on black"
+    code, _, err = run_cli("preview", "--stepping", "--body", "sex=X,height=tall", "--out", out)
+    assert code == 2 and "--body" in err
