@@ -187,3 +187,20 @@ def test_thesis_modifier_on_a_t_pose_capture():
     (f0, a0), (f1, a1) = arm(m), arm(out)
     assert np.ptp(f1) / np.ptp(f0) == pytest.approx(p["swing_ratio"], rel=0.03)
     assert a1.mean() - a0.mean() == pytest.approx(p["abduction_offset_deg"], abs=0.5)
+
+
+def test_protocol_average_is_the_actors_dtw_average():
+    """Exp 2's NoCOM: the DTW average of the four actors of a sex, carrying their mean body."""
+    import numpy as np
+
+    from stimuli.motion.average import protocol_average
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol("protocols/exp2_com_vs_average.yaml")
+    average = protocol_average(protocol, "F", "walk")
+    actors = [a for a in protocol.actors if a.sex == "F" and not a.practice_only]
+    assert average.metadata["actors"] == [a.id for a in actors]
+    assert np.isclose(average.metadata["height_m"], np.mean([a.height_m for a in actors]))
+    assert np.isclose(average.metadata["bmi"], np.mean([a.bmi for a in actors]))
+    assert average.metadata["source"] == "average" and average.metadata["n_motions"] == 4
+    assert abs(average.metadata["cadence_spm"] - 112) < 1.5

@@ -97,3 +97,28 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
     looped.metadata["looped"] = True
     looped.metadata.update(cycles=1, cadence_spm=120.0 * fps / (n - 1))
     return repeat(looped, cycles)
+
+
+def protocol_average(protocol, sex: str, gait: str, fps: float | None = None, cycles: int | None = None) -> Motion:
+    """The NoCOM motion of Exp 2: the DTW average of the test actors' own gaits of one sex.
+
+    The metadata records the average body (mean height and BMI of those actors), which the physics
+    step uses as the reference body.
+    """
+    from stimuli.motion.style import actor_gait
+
+    actors = [a for a in protocol.actors if a.sex == sex and not a.practice_only]
+    if len(actors) < 2:
+        raise StimuliError(f"protocol {protocol.name}: an average motion of sex {sex} needs at least 2 test actors, "
+                           f"found {len(actors)}")
+    if gait not in protocol.gaits:
+        raise StimuliError(f"protocol {protocol.name}: gaits.{gait} is not declared (cadence and speed are needed)")
+    spec = protocol.gaits[gait]
+    fps = float(fps or protocol.clip.fps)
+    cycles = int(cycles or protocol.clip.cycles)
+    motions = [actor_gait(a, gait, spec.cadence_spm, spec.speed_mps, protocol.seed, fps, cycles) for a in actors]
+    average = average_motion(motions, cycles=cycles, fps=fps)
+    average.metadata.update(actors=[a.id for a in actors], sex=sex,
+                            height_m=float(np.mean([a.height_m for a in actors])),
+                            bmi=float(np.mean([a.bmi for a in actors])))
+    return average

@@ -43,8 +43,10 @@ def reference_targets(protocol, sex: str, motion=None) -> tuple[float, float]:
 
 
 def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
-    """The NoCOM (average) motion of a sex × gait, or the generator's stand-in."""
+    """The NoCOM motion of a sex × gait: ``<motions_dir>/<sex>_<gait>.npz`` when given, else the DTW
+    average of the protocol's test actors of that sex (``stimuli.motion.average.protocol_average``)."""
     from stimuli.motion import Motion
+    from stimuli.motion.average import protocol_average
 
     if motions_dir is not None:
         path = Path(motions_dir) / f"{sex}_{gait}.npz"
@@ -52,15 +54,7 @@ def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
             raise StimuliError(f"{path}: NoCOM average motion for sex {sex}, gait {gait} not found "
                                f"(expected <motions>/<sex>_<gait>.npz)")
         return Motion.load(path)
-    from stimuli.motion.generate import GaitParams, generate
-
-    spec = protocol.gaits[gait]
-    height, _ = reference_targets(protocol, sex)
-    cycles = int(protocol.clip.cycles)
-    m = generate(GaitParams(gait=gait, cadence_spm=spec.cadence_spm, speed_mps=spec.speed_mps),
-                 height_m=height, fps=float(protocol.clip.fps), cycles=cycles)
-    m.metadata["nocom_source"] = "generator (no average motion given)"
-    return m
+    return protocol_average(protocol, sex, gait)
 
 
 def _key(motion_path: Path, actor: dict, gains_text: str) -> str:
