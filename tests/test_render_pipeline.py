@@ -170,3 +170,11 @@ def test_preview_writes_one_clip_and_its_poster(tmp_path, run_cli):
     assert frames.mean() < 30, "point-light: dots on black"
     code, _, err = run_cli("preview", "--stepping", "--body", "sex=X,height=tall", "--out", out)
     assert code == 2 and "--body" in err
+
+
+def test_familiarization_clip_shows_the_body_alone(short_protocol, tmp_path):
+    out = tmp_path / "fam"
+    report = _render(short_protocol("exp2_com_vs_average"), out, only="fam-F_Lo2")
+    row = _manifest(out)[0]
+    assert report.rendered == ["fam-F_Lo2"] and row["kind"] == "familiarization"
+    assert row["left"] == row["right"] == "" and row["practice"] == "1"

@@ -26,8 +26,8 @@ def manifest_row(protocol, stimulus, look, info, out_dir: Path, poster: Path, di
         if factor.role != "alternatives":
             row[factor.name] = stimulus.levels.get(factor.name, "")
     alternatives = protocol.factors_with_role("alternatives")
-    if alternatives and len(alternatives[0].levels) == 2:
-        row["left"], row["right"] = stimulus.arrangement
+    if alternatives and len(alternatives[0].levels) == 2:  # familiarization clips have no arrangement
+        row["left"], row["right"] = stimulus.arrangement or ("", "")
     elif alternatives:
         row["positions"] = "|".join(stimulus.arrangement)
     row |= {"practice": int(stimulus.practice), "kind": stimulus.kind,
