@@ -172,3 +172,12 @@ def test_row_of_labelled_walkers_each_in_its_own_column(body):
     body_px = (np.abs(frames[0].astype(int) - 158).max(axis=-1) < 40)
     quarters = [body_px[:, k * 120:(k + 1) * 120].sum() for k in range(4)]
     assert min(quarters) > 200, quarters
+
+
+@pytest.mark.parametrize("module", ["camera", "clip", "preview", "scene", "settings", "sources", "treadmill"])
+def test_docstring_examples(module):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(f"stimuli.render.{module}"))
+    assert result.attempted > 0 and result.failed == 0
