@@ -21,7 +21,7 @@ from stimuli.render.scene import Stage, grey_material, quad, static_mesh
 DECK_HEIGHT_M = 0.16
 BELT_Y = -0.002            # a hair below the ground so soles that touch y = 0 stay visible
 RAIL_WIDTH_M = 0.09
-HOOD_LENGTH_M = 0.22
+HOOD_LENGTH_M = 0.18
 STRIPE_M = 0.25            # wanted belt pattern period; adjusted per clip for a seamless loop
 STRIPE_FRACTION = 0.22     # the lighter band's share of one period
 BELT_GREY, STRIPE_GREY = (0.20, 0.20, 0.21), (0.36, 0.36, 0.37)
@@ -31,7 +31,7 @@ BELT_GREY, STRIPE_GREY = (0.20, 0.20, 0.21), (0.36, 0.36, 0.37)
 class TreadmillSize:
     """Belt length and width in metres (defaults fit walking and jogging adults)."""
 
-    length: float = 2.1
+    length: float = 1.8
     width: float = 0.85
 
 
