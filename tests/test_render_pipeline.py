@@ -43,7 +43,7 @@ def _render(path, out, **kwargs):
     return render_protocol(path, out, **options)
 
 
-def test_manifest_has_design_columns_and_verifiable_hashes(short_protocol, tmp_path):
+def test_manifest_has_design_columns_and_verifiable_hashes(short_protocol, tmp_path, run_cli):
     from stimuli.render.manifest import verify_manifest
     from stimuli.render.video import read_video
 
@@ -59,11 +59,14 @@ def test_manifest_has_design_columns_and_verifiable_hashes(short_protocol, tmp_p
         assert frames.shape == (10, 90, 160, 3) and int(row["n_frames"]) == 10 and meta["fps"] == 10
         assert (out / row["poster"]).exists()
     assert verify_manifest(out) == []
+    assert run_cli("render", "--out", out, "--verify")[0] == 0
     assert (out / "contact_sheet.png").exists()
     with open(out / rows[0]["file"], "r+b") as handle:   # corrupt one clip
         handle.seek(-10, os.SEEK_END)
         handle.write(b"0123456789")
     assert len(verify_manifest(out)) == 1
+    code, _, err = run_cli("render", "--out", out, "--verify")
+    assert code == 2 and "do not verify" in err
 
 
 def test_second_run_renders_only_what_is_new_or_changed(short_protocol, tmp_path):
@@ -104,6 +107,11 @@ def test_missing_motion_sources_are_named_not_faked(short_protocol, tmp_path, ru
     assert code == 2
     assert "could not be rendered" in err and "physics protocol" in err
     assert not list((tmp_path / "x").glob("clips/*.mp4"))
+
+
+def test_render_without_a_protocol_is_a_user_error(tmp_path, run_cli):
+    code, _, err = run_cli("render", "--out", tmp_path)
+    assert code == 2 and "PROTOCOL" in err
 
 
 @pytest.mark.parametrize("args, message", [

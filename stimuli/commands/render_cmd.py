@@ -11,7 +11,7 @@ def register(subparsers) -> None:
                               description="Render every test, practice and familiarization stimulus of a protocol "
                                           "into clips/*.mp4, posters/*.png, manifest.csv and contact_sheet.png. "
                                           "Clips already rendered with the same inputs are kept.")
-    p.add_argument("protocol", type=Path)
+    p.add_argument("protocol", type=Path, nargs="?", help="protocol YAML (not needed with --verify)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--resolution", default=None, help="WIDTHxHEIGHT (default: the protocol's clip size)")
     p.add_argument("--fps", type=int, default=None, help="frames per second (default: the protocol's)")
@@ -59,6 +59,8 @@ def run_render(args: argparse.Namespace) -> int:
             raise StimuliError(f"{args.out}/manifest.csv: {len(problems)} clip(s) do not verify")
         print(f"{args.out}/manifest.csv: every clip verifies")
         return 0
+    if args.protocol is None:
+        raise StimuliError("render: a PROTOCOL file is needed (only --verify works without one)")
     report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps, limit=args.limit,
                              only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
                              source=args.poses, motions_dir=args.motions)
