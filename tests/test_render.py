@@ -181,3 +181,20 @@ def test_docstring_examples(module):
 
     result = doctest.testmod(importlib.import_module(f"stimuli.render.{module}"))
     assert result.attempted > 0 and result.failed == 0
+
+
+@pytest.mark.parametrize("target", [("M", 1.83, 35.8), ("F", 1.60, 19.5)])
+def test_redrawn_region_holds_every_vertex_of_every_frame(target):
+    """Only the dynamic region is redrawn per frame: any skin outside it would be cut off."""
+    from stimuli.bodies import fit_body
+    from stimuli.render.clip import apply_pose, centred_root, dynamic_region, placements
+
+    heavy = fit_body(*target)
+    for azimuth in (0.0, 35.0, 90.0):
+        look = _look(width=320, height=180, azimuth=azimuth)
+        figure = _figure(heavy, look)
+        poses, view = placements(look, 1, heavy.anthropometry.height_m)
+        root = centred_root(figure)
+        x0, y0, x1, y1 = dynamic_region(view, [figure], [root], poses, [], False)
+        xy = view.project(apply_pose(poses[0], heavy.skin(figure.rotations, root).reshape(-1, 3)))
+        assert xy[:, 0].min() >= x0 and xy[:, 0].max() <= x1 and xy[:, 1].min() >= y0 and xy[:, 1].max() <= y1

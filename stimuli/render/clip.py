@@ -150,23 +150,29 @@ def render_frames(look: Look, figures: list[Figure]):
         yield overlay.apply(frame) if overlay else frame
 
 
-def dynamic_region(view, figures, roots, poses, treadmills, dots: bool, margin_m: float = 0.25):
+def flesh_margin(body) -> float:
+    """How far the skin reaches beyond the skeleton: max over vertices of the distance to the
+    nearest bone head in the rest pose (belly, top of the head, …), plus 3 cm for posing."""
+    from scipy.spatial import cKDTree
+
+    distance, _ = cKDTree(body.rig.rest_heads).query(body.vertices)
+    return float(distance.max()) + 0.03
+
+
+def dynamic_region(view, figures, roots, poses, treadmills, dots: bool):
     """Pixel rectangle (x0, y0, x1, y1) holding everything that moves during the clip.
 
-    Bodies: every bone head of every frame (forward kinematics, cheap) widened by ``margin_m``
-    for flesh, hands and the top of the head; belts: their four corners.
+    Bodies: every bone head of every frame (forward kinematics, cheap) widened by the body's
+    :func:`flesh_margin` (dots: their radius); belts: their four corners.
     """
-    points = []
-    for f, root, pose in zip(figures, roots, poses):
-        heads = f.body.rig.forward_kinematics(f.rotations, root)[1].reshape(-1, 3)
-        points.append(apply_pose(pose, heads))
+    focal = 0.5 * view.height / np.tan(0.5 * view.yfov)
     pixels, pads = [], []
-    for p in points:
-        xy = view.project(p)
+    for f, root, pose in zip(figures, roots, poses):
+        p = apply_pose(pose, f.body.rig.forward_kinematics(f.rotations, root)[1].reshape(-1, 3))
         depth = (p - view.pose[:3, 3]) @ -view.pose[:3, 2]
-        pixels.append(xy)
-        focal = 0.5 * view.height / np.tan(0.5 * view.yfov)
-        pads.append(focal * (0.05 if dots else margin_m) / np.maximum(depth, 0.1) + 3)
+        margin = 0.05 if dots else flesh_margin(f.body)
+        pixels.append(view.project(p))
+        pads.append(focal * margin / np.maximum(depth, 0.1) + 3)
     for t in treadmills:
         pixels.append(view.project(t.belt_corners()))
         pads.append(np.full(4, 3.0))

@@ -12,7 +12,7 @@ from stimuli.errors import StimuliError
 from stimuli.render.clip import Look
 
 # Bump when a change to the renderer changes pixels: every clip is then rendered again.
-RENDER_VERSION = "3"
+RENDER_VERSION = "4"
 QUICK_WIDTH, QUICK_FPS = 320, 15
 
 
