@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -124,7 +125,8 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     progress(f"physics: {len(jobs)} COM motion(s) to simulate, {len(cached)} cached")
     if jobs:
         workers = max(1, min(workers, len(jobs), os.cpu_count() or 1))
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        # spawn, not fork: a fork of a process that has loaded torch/OpenMP can deadlock on its locks
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
             for job, report in zip(jobs, pool.map(_job, jobs)):
                 progress(f"  {job['name']}: b {report['b_m'] * 1000:.2f} mm, tracking {report['tracking_rms_deg_overall']:.2f}°, "
                          f"{'FELL' if report['fell'] else 'ok'}")
