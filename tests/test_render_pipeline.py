@@ -125,19 +125,22 @@ def test_bad_options_exit_2(args, message, short_protocol, tmp_path, run_cli):
 
 
 @pytest.mark.slow
-def test_ctrl_c_leaves_no_half_files_and_the_rerun_resumes(short_protocol, tmp_path):
+@pytest.mark.parametrize("workers", [1, 2])
+def test_ctrl_c_leaves_no_half_files_and_the_rerun_resumes(short_protocol, tmp_path, workers):
     path = short_protocol("exp1_shape_motion", duration=2.0)
     out = tmp_path / "exp1"
     command = [sys.executable, "-m", "stimuli.cli", "render", str(path), "--out", str(out), "--limit", "6",
-               "--resolution", "320x180", "--fps", "15", "--workers", "1", "--poses", "procedural", "--no-progress"]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+               "--resolution", "320x180", "--fps", "15", "--workers", str(workers), "--poses", "procedural",
+               "--no-progress"]
+    # Its own process group, so that the interrupt reaches the workers and ffmpeg too, as Ctrl-C does.
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     deadline = time.time() + 240
     while time.time() < deadline and process.poll() is None:
         if (out / "manifest.csv").exists() and len(_manifest(out)) >= 2:
             break
         time.sleep(0.2)
     time.sleep(0.5)    # let it get into the middle of the next clip
-    process.send_signal(signal.SIGINT)
+    os.killpg(process.pid, signal.SIGINT)
     process.wait(timeout=60)
     assert process.returncode == 130
     finished = [r["stimulus_id"] for r in _manifest(out)]

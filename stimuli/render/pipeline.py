@@ -181,9 +181,18 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
                     for future in done:
                         bar.update(1)
                         yield future.result()
-            except BaseException:
-                for future in pending:  # stop queued clips; running ones clean up their temp files
+            except KeyboardInterrupt:
+                for future in pending:  # stop queued clips
                     future.cancel()
+                # Clips already running either finish (and are recorded) or, interrupted too,
+                # delete their temporary files; either way no clip is left unaccounted for.
+                for future in pending:
+                    if not future.cancelled():
+                        try:
+                            result = future.result()
+                        except BaseException:
+                            continue
+                        yield result
                 raise
     finally:
         bar.close()
