@@ -104,9 +104,12 @@ def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: 
     if kind == "method":
         rot, root, speed = method_motion(protocol, level, stimulus, gait, body, look, motions_dir)
     else:
+        what = {"strength": "the thesis modifier applied per PARAMETER level at this body-fat strength",
+                "source": "the validation walks A–D (lean mocap, keyframed, modifier output, obese mocap)"}
         raise MissingSource(
-            f"{protocol.name}: stimulus {stimulus.stimulus_id} needs motions for {kind} = {level!r} "
-            f"(the thesis modifier / validation walks of stimuli.motion), which are not available yet")
+            f"{protocol.name}: stimulus {stimulus.stimulus_id} needs a motion for {kind} = {level!r} "
+            f"({what.get(kind, 'a motion source for this factor')}); the renderer does not map these "
+            "levels to motions yet (use --poses procedural to check the layout)")
     return Figure(body, rot, root, speed, label)
 
 
