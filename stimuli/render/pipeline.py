@@ -60,11 +60,14 @@ def select(stimuli: list, only: str | list[str] | None, limit: int | None) -> li
     return stimuli
 
 
-def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=False) -> list[Job]:
+def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=False, motions_dir=None) -> list[Job]:
+    from stimuli.render.sources import motion_files
+
     jobs = []
     for s in stimuli:
         look = look_for(protocol, s, resolution, fps, quick)
-        jobs.append(Job(s, look, inputs_hash(protocol, s, look), out_dir / "clips" / f"{s.stimulus_id}.mp4",
+        digest = inputs_hash(protocol, s, look, motion_files(protocol, s, motions_dir))
+        jobs.append(Job(s, look, digest, out_dir / "clips" / f"{s.stimulus_id}.mp4",
                         out_dir / "posters" / f"{s.stimulus_id}.png"))
     return jobs
 
@@ -122,7 +125,7 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     out_dir = Path(out_dir)
     design = build_design(protocol)
     order = [s.stimulus_id for s in design.stimuli]
-    jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick)
+    jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick, motions_dir)
     previous = read_manifest(out_dir)
     report = RenderReport(out_dir)
     rows = {sid: row for sid, row in previous.items() if sid in order and (out_dir / row["file"]).exists()}

@@ -4,9 +4,11 @@ and the hash that decides whether a finished clip can be kept when rendering aga
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import re
+from pathlib import Path
 
 from stimuli.errors import StimuliError
 from stimuli.render.clip import Look
@@ -60,8 +62,34 @@ def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False)
                 distance_m=camera.distance_m, fov_deg=camera.fov_deg, background=clip.background, labels=labels)
 
 
-def inputs_hash(protocol, stimulus, look: Look) -> str:
-    """SHA-256 over everything a clip depends on: the stimulus, its actors, gaits, look, versions."""
+@functools.lru_cache(maxsize=1)
+def upstream_digest() -> str:
+    """SHA-256 of the code that makes bodies and motions (and the renderer's own shaders).
+
+    A change to the generator, the retargeting or the body fitter changes every clip's inputs,
+    so a resumed render does not keep clips made by the old code.
+    """
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for folder in ("bodies", "motion", "physics", "render/shaders"):
+        for path in sorted((root / folder).glob("*")):
+            if path.suffix in (".py", ".json", ".vert", ".frag"):
+                digest.update(path.name.encode() + path.read_bytes())
+    return digest.hexdigest()
+
+
+def files_digest(paths) -> str:
+    """SHA-256 over the bytes of motion files a clip reads ('' entries for missing files)."""
+    digest = hashlib.sha256()
+    for path in paths:
+        path = Path(path)
+        digest.update(path.name.encode() + (path.read_bytes() if path.is_file() else b""))
+    return digest.hexdigest()
+
+
+def inputs_hash(protocol, stimulus, look: Look, motion_files=()) -> str:
+    """SHA-256 over everything a clip depends on: the stimulus, its actors, gaits, look, versions,
+    the upstream code (:func:`upstream_digest`) and any motion files it reads."""
     actor_ids = {stimulus.body_actor, stimulus.motion_actor, protocol.display.body} - {"", None}
     payload = {
         "render_version": RENDER_VERSION,
@@ -72,5 +100,7 @@ def inputs_hash(protocol, stimulus, look: Look) -> str:
         "look": dataclasses.asdict(look),
         "loop": protocol.clip.loop,
         "cycles": protocol.clip.cycles,
+        "upstream": upstream_digest(),
+        "motion_files": files_digest(motion_files),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()

@@ -157,6 +157,24 @@ def on_rig(motion, body):
     return retarget(motion, body)
 
 
+def _method_file(protocol, method: str, stimulus, gait: str, sex: str) -> str:
+    """Where the physics step keeps a METHOD motion, relative to its output folder."""
+    return f"nocom/{sex}_{gait}.npz" if method == "NoCOM" else f"motions/COM_{stimulus.body_actor}_{gait}.npz"
+
+
+def motion_files(protocol, stimulus, motions_dir=None) -> list:
+    """The motion files a stimulus reads (part of its inputs hash): Exp 2's NoCOM/COM files."""
+    from pathlib import Path
+
+    alternatives = protocol.factors_with_role("alternatives")
+    if motions_dir is None or not alternatives or alternatives[0].maps_to != "method":
+        return []
+    sex = next((a.sex for a in protocol.actors if a.id == stimulus.body_actor), "")
+    gait = gait_of(protocol, stimulus)
+    levels = stimulus.arrangement or alternatives[0].levels[:1]
+    return [Path(motions_dir) / _method_file(protocol, m, stimulus, gait, sex) for m in levels]
+
+
 def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, motions_dir=None):
     """NoCOM: the sex × gait average motion; COM: that motion retargeted by physics onto the body.
 
@@ -172,7 +190,7 @@ def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, 
         raise MissingSource(f"METHOD = {method} needs the NoCOM/COM motions of the physics step: run "
                             f"'shapemotion physics protocol {protocol.name}.yaml --out DIR' and render with "
                             "--motions DIR")
-    name = f"nocom/{sex}_{gait}.npz" if method == "NoCOM" else f"motions/COM_{stimulus.body_actor}_{gait}.npz"
+    name = _method_file(protocol, method, stimulus, gait, sex)
     path = Path(motions_dir) / name
     if not path.is_file():
         raise MissingSource(f"--motions {motions_dir}: {name} not found (METHOD = {method}, body "
