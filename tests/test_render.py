@@ -198,3 +198,21 @@ def test_redrawn_region_holds_every_vertex_of_every_frame(target):
         x0, y0, x1, y1 = dynamic_region(view, [figure], [root], poses, [], False)
         xy = view.project(apply_pose(poses[0], heavy.skin(figure.rotations, root).reshape(-1, 3)))
         assert xy[:, 0].min() >= x0 and xy[:, 0].max() <= x1 and xy[:, 1].min() >= y0 and xy[:, 1].max() <= y1
+
+
+def test_inputs_hash_follows_look_stimulus_and_motion_files(tmp_path, protocol_path):
+    from stimuli.design import build_design
+    from stimuli.protocol import load_protocol
+    from stimuli.render.settings import inputs_hash, look_for
+
+    protocol = load_protocol(protocol_path("exp2_com_vs_average"))
+    first, second = build_design(protocol).stimuli[:2]
+    look = look_for(protocol, first)
+    motion = tmp_path / "nocom.npz"
+    motion.write_bytes(b"one")
+    base = inputs_hash(protocol, first, look, [motion])
+    assert base == inputs_hash(protocol, first, look, [motion])
+    assert base != inputs_hash(protocol, second, look, [motion])
+    assert base != inputs_hash(protocol, first, look_for(protocol, first, resolution="640x360"), [motion])
+    motion.write_bytes(b"two")
+    assert base != inputs_hash(protocol, first, look, [motion])
