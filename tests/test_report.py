@@ -74,7 +74,7 @@ def test_exp2_report_has_figure9_and_gee(reports):
     results = summary["sections"][0]["results"]
     assert {"METHOD", "SEX:METHOD"} <= set(results["significant"])
     assert all("METHOD" in e["effect"] for e in results["effects"])
-    assert results["posthoc"]["METHOD"] == "NoCOM > COM"
+    assert results["posthoc"]["METHOD"] == "NC > C"  # Table 4 abbreviations from the protocol
     assert (folder / "report" / "figures" / "figure9.svg").exists()
     models = pd.read_csv(folder / "report" / "additional_models.csv").set_index(["model", "term"])
     for model in ("logistic GEE (exchangeable, robust SE)", "logistic mixed model (variational Bayes, approximate)"):
