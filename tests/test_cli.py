@@ -39,9 +39,18 @@ def test_console_script_exit_codes(tmp_path):
     assert failed.returncode == 2 and "Traceback" not in failed.stderr and "required field is missing" in failed.stderr
 
 
-def test_demo_writes_the_designs(tmp_path, run_cli):
+@pytest.mark.slow
+def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     code, out, _ = run_cli("demo", "--out", tmp_path, "--quick")
     assert code == 0
+    for step in ("design", "bodies", "physics", "render", "survey", "analysis"):
+        assert f"[{step}] done" in out
+    assert (tmp_path / "bodies" / "contact_sheet.png").stat().st_size > 10_000
+    assert (tmp_path / "exp2_com_vs_average" / "physics" / "fig7_walk.png").is_file()
+    for name in ("exp1_shape_motion", "exp2_com_vs_average"):
+        clips = list((tmp_path / "quick_clips" / name / "clips").glob("*.mp4"))
+        assert len(clips) == 4 and all(c.stat().st_size > 1000 for c in clips)
     for name in ("exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"):
         assert (tmp_path / name / "trials.csv").stat().st_size > 0
-        assert name in out
+        assert (tmp_path / name / "survey" / "survey.qsf").is_file()
+        assert "<table" in (tmp_path / name / "results" / "report" / "report.html").read_text()

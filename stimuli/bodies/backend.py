@@ -59,6 +59,9 @@ def model():
     os.environ.setdefault("WARP_CACHE_PATH", str(project_cache_root() / "warp"))
     start = time.perf_counter()
     import torch  # noqa: F401  (timed with the model: it is the bulk of a cold start)
+    import warp
+
+    warp.config.log_level = warp.LOG_WARNING  # its start-up banner would repeat in every render worker's output
     import anny
     from anny.paths import set_anny_cache_path
 
