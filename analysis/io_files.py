@@ -24,10 +24,17 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs are shared files
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    current = os.umask(0)
+    os.umask(current)
+    return current
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
@@ -36,6 +43,7 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 
 def replace_directory(staging: Path, target: Path) -> None:
     """Move a fully written staging directory into place (the old one, if any, is removed first)."""
+    os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes 0700
     if target.exists():
         backup = target.with_name(f".{target.name}.old")
         shutil.rmtree(backup, ignore_errors=True)
