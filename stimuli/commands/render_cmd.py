@@ -26,6 +26,9 @@ def register(subparsers) -> None:
                    help="folder written by 'shapemotion physics protocol' (Exp 2's NoCOM and COM motions)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verify", action="store_true", help="only re-hash the clips of an existing manifest")
+    p.add_argument("--no-survey", action="store_true",
+                   help="don't write the design files and survey exports into --out after a complete render")
+    p.add_argument("--video-base-url", default=None, help="base URL of the clips in the survey exports")
     p.set_defaults(func=run_render)
 
     p = subparsers.add_parser("preview", help="render one clip from a motion file and a body spec",
@@ -65,7 +68,29 @@ def run_render(args: argparse.Namespace) -> int:
                              only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
                              source=args.poses, motions_dir=args.motions)
     print(report.summary())
+    if not args.no_survey:
+        for line in survey_for_render_folder(args.protocol, args.out, report, args.video_base_url):
+            print(line)
     return 0
+
+
+def survey_for_render_folder(protocol_path, out_dir, report, video_base_url=None) -> list[str]:
+    """Make the render folder a complete survey source: the design files and every survey export.
+
+    Only when every stimulus of the design has its clip (a ``--limit``/``--only`` render is partial,
+    and a survey pointing at missing clips would be wrong).
+    """
+    from stimuli.design import build_design, write_design
+    from stimuli.protocol import load_protocol
+    from stimuli.render.manifest import read_manifest
+    from stimuli.survey import export_all
+
+    design = build_design(load_protocol(protocol_path))
+    missing = {s.stimulus_id for s in design.stimuli} - set(read_manifest(out_dir))
+    if missing or report.failed:
+        return [f"survey: not exported, {len(missing)} stimuli have no clip yet (render them all first)"]
+    write_design(design, out_dir)
+    return [f"survey: {r.format} → {r.path}" for r in export_all(out_dir, video_base_url=video_base_url)]
 
 
 def run_preview(args: argparse.Namespace) -> int:
