@@ -8,6 +8,10 @@ laterally — the thesis's Softimage script offsets each heel by it), an arm-bob
 arm-swing ratio (arm curves scaled about their mean: v′ = (v − mean)·ratio + mean), plus the
 height scale H / 1.758.
 
+The point-light survey's strengths (Table 4-1, ch. 4) are below it: ``table_strengths`` looks up
+named rows at a body-fat %, ``modify_strengths`` applies them with the same operations plus hip
+twist, torso twist and spinal erectness, which the five-parameter modifier does not model.
+
 Examples
 --------
 >>> p = thesis_parameters(1.83, 34.1)
@@ -113,4 +117,128 @@ def modify(motion: Motion, height_m: float, body_fat_pct: float, chest_m: float 
     if abs(p["speed_ratio"] - 1.0) > 1e-12:
         m = retime(m, p["speed_ratio"])
     m.metadata.update(modifier={k: float(v) for k, v in p.items()}, source=f"{motion.metadata.get('source', '')}+thesis")
+    return m
+
+
+# -- Table 4-1: the point-light survey's strengths ------------------------------------------------
+# The point-light survey (thesis ch. 4) predates the regressions above: the animator set each gait
+# parameter's value for 35 % body fat by eye (speed from Equation 2), and the other strengths were
+# interpolated linearly from the unchanged lean walker at 12 %. Table 4-1 prints the six values per
+# parameter; they are kept here as printed (garbled digits restored from that linear rule) so that
+# a protocol names rows and the numbers stay data. At MP's height the regression modifier cannot
+# stand in for them: its speed and arm bob depend on height only, so they would not vary at all.
+STRENGTH_BODY_FAT = (0.5, 12.0, 23.5, 35.0, 46.5, 58.0)
+SI_UNIT_M = 0.1  # Appendix D's script: cmToSi = 0.1, i.e. one Softimage unit is 10 cm
+_TWIST = (-0.8, 1.0, 2.8, 4.644041, 6.5, 8.3)
+TABLE_4_1 = {
+    # row: (operation, values at STRENGTH_BODY_FAT); "swing" scales a curve about its mean,
+    # "mean_deg" shifts its mean, "retime" plays the whole walk faster (cadence and speed × value),
+    # "offset_si" moves each heel outwards by value Softimage units.
+    "hip_twist": ("swing", _TWIST),                       # Hips local.roty
+    "torso_twist": ("swing", _TWIST),                     # Chest local.rotx
+    "arm_abduction": ("mean_deg", (-3.19355, 0.0, 3.19355, 6.3871, 9.58065, 12.7742)),
+    "arm_bob": ("swing", (0.6, 1.0, 1.4, 1.895681, 2.3, 2.8)),
+    "arm_swing": ("swing", (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)),
+    "arm_swing_mild": ("swing", (0.6, 1.0, 1.3, 1.6, 1.9, 2.2)),   # survey 5 (whole body) only
+    "speed_cadence": ("retime", (1.1, 1.0, 0.9, 0.805026, 0.7, 0.6)),
+    "walking_base": ("offset_si", (-1.0, 0.0, 1.0, 2.0, 3.0, 4.0)),
+    "spinal_erectness": ("mean_deg", (-5.0, 0.0, 5.0, 10.0, 15.0, 20.0)),  # lowest spine bone, extension
+}
+
+
+def table_strengths(parameters: str, body_fat_pct: float) -> dict[str, float]:
+    """Table 4-1's values of the ``+``-joined rows at a body-fat %, linear between its columns.
+
+    >>> table_strengths("arm_abduction+arm_bob", 35)
+    {'arm_abduction': 6.3871, 'arm_bob': 1.895681}
+    """
+    names = [n.strip() for n in str(parameters).split("+") if n.strip()]
+    unknown = [n for n in names if n not in TABLE_4_1]
+    if not names or unknown:
+        raise StimuliError(f"modifier: unknown Table 4-1 parameter(s) {unknown or [parameters]}; "
+                           f"expected names joined by '+' from: {', '.join(TABLE_4_1)}")
+    lo, hi = STRENGTH_BODY_FAT[0], STRENGTH_BODY_FAT[-1]
+    if not lo <= float(body_fat_pct) <= hi:
+        raise StimuliError(f"modifier: body fat {body_fat_pct} % is outside Table 4-1's strengths ({lo}–{hi} %)")
+    return {n: float(np.interp(float(body_fat_pct), STRENGTH_BODY_FAT, TABLE_4_1[n][1])) for n in names}
+
+
+def _yaw(grot: np.ndarray) -> np.ndarray:
+    """Heading (rad, about +y) of world rotations whose rest pose faces +z, unwrapped over time."""
+    f = quat.rotate(grot, np.array([0.0, 0.0, 1.0]))
+    return np.unwrap(np.arctan2(f[..., 0], f[..., 2]))
+
+
+def _turn_world(m: Motion, rot: np.ndarray, j: int, rotvec: np.ndarray) -> None:
+    """Turn joint ``j`` (and its subtree) by world rotation vectors (T×3) about its own position."""
+    p = m.parents[j]
+    turn = quat.from_axis_angle(rotvec)
+    if p < 0:
+        rot[:, j] = quat.mul(turn, rot[:, j])
+        return
+    gp = m.global_transforms(rot, m.root_translation)[0][:, p]
+    rot[:, j] = quat.mul(quat.mul(quat.inv(gp), quat.mul(turn, gp)), rot[:, j])
+
+
+def _about_y(angle: np.ndarray) -> np.ndarray:
+    return np.stack([0 * angle, angle, 0 * angle], -1)
+
+
+def _twist_torso(m: Motion, rot: np.ndarray, roles: dict, k: float) -> None:
+    """Scale the chest bone's heading relative to its parent about its mean (Chest local.rotx:
+    the thesis twisted that one bone, not the whole trunk above the pelvis)."""
+    grot = m.global_transforms(rot, m.root_translation)[0]
+    chest = roles["chest"]
+    rel = _yaw(grot[:, chest]) - _yaw(grot[:, m.parents[chest]])
+    _turn_world(m, rot, roles["chest"], _about_y((rel - rel.mean()) * (k - 1.0)))
+
+
+def _twist_hips(m: Motion, rot: np.ndarray, roles: dict, k: float) -> np.ndarray:
+    """Scale the pelvis heading about its mean (Hips local.roty); the legs are re-solved by IK so
+    the feet stay where they were, as on the thesis rig, whose legs were IK chains."""
+    grot, gpos = m.global_transforms(rot, m.root_translation)
+    feet = {s: (gpos[:, roles[f"{s}_ankle"]].copy(), grot[:, roles[f"{s}_ankle"]].copy()) for s in "lr"}
+    yaw = _yaw(grot[:, roles["pelvis"]])
+    _turn_world(m, rot, roles["pelvis"], _about_y((yaw - yaw.mean()) * (k - 1.0)))
+    for s, (target, keep) in feet.items():
+        rot = two_bone_ik(m, rot, m.root_translation, s, target, keep)
+    return rot
+
+
+def _erect_spine(m: Motion, rot: np.ndarray, roles: dict, deg: float) -> None:
+    """Extend the lower spine by ``deg`` (lean back; Lower Spine local.rotz, average position)."""
+    # The character faces +z with +x its left: a negative turn about +x tips the trunk backwards.
+    angle = np.full(m.n_frames, -np.radians(deg))
+    _turn_world(m, rot, roles["spine"], np.stack([angle, 0 * angle, 0 * angle], -1))
+
+
+def modify_strengths(motion: Motion, strengths: dict[str, float]) -> Motion:
+    """Apply Table 4-1 rows (``table_strengths``) to a walk with the modifier's own operations:
+    arm curves scaled about their mean or shifted, heels moved outwards, the whole walk retimed;
+    hip and torso twist and spinal erectness extend the five-parameter modifier."""
+    unknown = sorted(set(strengths) - set(TABLE_4_1))
+    if unknown:
+        raise StimuliError(f"modifier: unknown Table 4-1 parameter(s) {unknown}")
+    roles = role_indices(motion)
+    m, rot = motion, motion.rotations.copy()
+    if "spinal_erectness" in strengths:
+        _erect_spine(m, rot, roles, strengths["spinal_erectness"])
+    if "torso_twist" in strengths:
+        _twist_torso(m, rot, roles, strengths["torso_twist"])
+    if "hip_twist" in strengths:
+        rot = _twist_hips(m, rot, roles, strengths["hip_twist"])
+    bob = strengths.get("arm_bob", 1.0)
+    swing = strengths.get("arm_swing", strengths.get("arm_swing_mild", 1.0))
+    offset = np.radians(strengths.get("arm_abduction", 0.0))
+    rest = m.rest_positions()
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        if (bob, swing, offset) != (1.0, 1.0, 0.0) and f"{s}_shoulder" in roles and f"{s}_elbow" in roles:
+            arm = rest[roles[f"{s}_elbow"]] - rest[roles[f"{s}_shoulder"]]
+            _scale_arm(rot, roles[f"{s}_shoulder"], sign, bob, swing, offset, arm / np.linalg.norm(arm))
+    rot = _widen_base(m, rot, strengths.get("walking_base", 0.0) * SI_UNIT_M)
+    m = m.replace(rotations=rot)
+    if abs(strengths.get("speed_cadence", 1.0) - 1.0) > 1e-12:
+        m = retime(m, strengths["speed_cadence"])
+    m.metadata.update(strengths={k: float(v) for k, v in strengths.items()},
+                      source=f"{motion.metadata.get('source', '')}+table4-1")
     return m
