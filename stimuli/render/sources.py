@@ -3,7 +3,8 @@
 The protocol's ``maps_to`` fields decide: ``body`` → whose body (``Stimulus.body_actor``),
 ``motion`` → whose motion (``Stimulus.motion_actor``), ``gait`` → walk/jog, ``method`` → NoCOM
 (the sex × gait average motion) or COM (that motion retargeted by physics onto the body),
-``strength`` → the thesis modifier at a body-fat level, ``source`` → the thesis validation walks.
+``strength`` → the thesis modifier at a body-fat level, ``source`` → the thesis validation walks
+(both in :mod:`stimuli.render.thesis_sources`).
 Where a motion source is not available yet, :class:`MissingSource` (a ``StimuliError``) names it.
 
 Every motion is a seamless loop; :func:`fit_loop` resamples it so that a whole number of loops
@@ -103,13 +104,17 @@ def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: 
     gait = gait_of(protocol, stimulus)
     if kind == "method":
         rot, root, speed = method_motion(protocol, level, stimulus, gait, body, look, motions_dir)
+    elif kind == "strength":  # thesis point-light: Table 4-1 at this body fat, per PARAMETER level
+        from stimuli.render.thesis_sources import strength_motion
+
+        rot, root, speed = strength_motion(protocol, stimulus, level, body, look)
+    elif kind == "source":  # thesis validation: the walk the SOURCE level's settings name
+        from stimuli.render.thesis_sources import source_motion
+
+        rot, root, speed = source_motion(protocol, stimulus, level, body, look)
     else:
-        what = {"strength": "the thesis modifier applied per PARAMETER level at this body-fat strength",
-                "source": "the validation walks A–D (lean mocap, keyframed, modifier output, obese mocap)"}
-        raise MissingSource(
-            f"{protocol.name}: stimulus {stimulus.stimulus_id} needs a motion for {kind} = {level!r} "
-            f"({what.get(kind, 'a motion source for this factor')}); the renderer does not map these "
-            "levels to motions yet (use --poses procedural to check the layout)")
+        raise MissingSource(f"{protocol.name}: stimulus {stimulus.stimulus_id} needs a motion for {kind} = "
+                            f"{level!r}; the renderer maps only method, strength and source levels to motions")
     return Figure(body, rot, root, speed, label)
 
 
@@ -163,10 +168,15 @@ def _method_file(protocol, method: str, stimulus, gait: str, sex: str) -> str:
 
 
 def motion_files(protocol, stimulus, motions_dir=None) -> list:
-    """The motion files a stimulus reads (part of its inputs hash): Exp 2's NoCOM/COM files."""
+    """The motion files a stimulus reads (part of its inputs hash): Exp 2's NoCOM/COM files, the
+    thesis validation's ``bvh:`` captures."""
     from pathlib import Path
 
     alternatives = protocol.factors_with_role("alternatives")
+    if alternatives and alternatives[0].maps_to == "source":
+        from stimuli.render.thesis_sources import source_files
+
+        return source_files(protocol, stimulus)
     if motions_dir is None or not alternatives or alternatives[0].maps_to != "method":
         return []
     sex = next((a.sex for a in protocol.actors if a.id == stimulus.body_actor), "")
