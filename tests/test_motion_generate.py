@@ -122,7 +122,7 @@ def test_thesis_worked_example_to_1e5():
     walking base is printed with 4 decimals, so half its last digit)."""
     p = thesis_parameters(1.83, 34.1)
     expected = {"t": "0.960870", "wthr": "0.945304", "chest_m": "1.133739", "speed_ratio": "1.077012",
-                "abduction_offset_deg": "6.14649", "base_cm": "85.9973", "bob_ratio": "1.108682",
+                "abduction_offset_deg": "6.14649", "base_mm": "85.9973", "bob_ratio": "1.108682",
                 "swing_ratio": "1.286497", "height_scale": "1.040956"}
     for k, text in expected.items():
         half_digit = 0.5 * 10.0 ** -len(text.split(".")[1])
@@ -140,7 +140,7 @@ def test_thesis_identity_for_the_base_actor():
 
 def test_thesis_modifier_effects_on_a_walk():
     m = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), 1.758)
-    out = modify(m, 1.83, 34.1, base_scale=0.1)
+    out = modify(m, 1.83, 34.1)
     p = out.metadata["modifier"]
     assert out.metadata["cadence_spm"] == pytest.approx(m.metadata["cadence_spm"] * p["speed_ratio"])
     assert out.metadata["speed_mps"] == pytest.approx(1.2 * p["speed_ratio"])
@@ -152,11 +152,11 @@ def test_thesis_modifier_effects_on_a_walk():
 
     assert np.ptp(arm_range(out, 2)) / np.ptp(arm_range(m, 2)) == pytest.approx(p["swing_ratio"], rel=0.03)
     assert np.mean(arm_range(out, 0)) - np.mean(arm_range(m, 0)) == pytest.approx(p["abduction_offset_deg"], abs=0.5)
-    # Feet 10 % of the thesis offset wider per foot (≈ 3.1 cm), body scaled by H/1.758.
+    # Feet wider by the walking-base offset read in mm per foot (≈ 3.1 cm), body scaled by H/1.758.
     pos0, pos1 = m.positions(), out.positions()
     w0 = np.mean(pos0[:, m.index("l_ankle"), 0] - pos0[:, m.index("r_ankle"), 0]) * p["height_scale"]
     w1 = np.mean(pos1[:, m.index("l_ankle"), 0] - pos1[:, m.index("r_ankle"), 0])
-    assert w1 - w0 == pytest.approx(2 * p["base_offset_cm"] / 1000, abs=0.01)
+    assert w1 - w0 == pytest.approx(2 * p["base_offset_mm"] / 1000, abs=0.01)
 
 
 def test_knee_angles_in_the_rest_pose_and_bent():
@@ -174,7 +174,7 @@ def test_knee_angles_in_the_rest_pose_and_bent():
 def test_thesis_modifier_on_a_t_pose_capture():
     """The arm curves are measured from the rig's own rest direction, so a T-pose CMU capture works too."""
     m = trim_cycles(read_bvh(ROOT / "stimuli" / "data" / "cmu_35_01_walk.bvh"), 1).resample(30)
-    out = modify(m, 1.83, 34.1, base_scale=0.1)
+    out = modify(m, 1.83, 34.1)
     p = out.metadata["modifier"]
 
     def arm(mm):

@@ -236,11 +236,11 @@ def test_validation_sources_differ_as_described(protocol_path):
 
     ae = next(a for a in protocol.actors if a.id == "AE")
     p = thesis_parameters(ae.height_m, ae.body_fat_pct, ae.chest_m, ae.waist_m / ae.hip_m)
-    assert p["abduction_offset_deg"] > 0 and p["base_offset_cm"] > 0
+    assert p["abduction_offset_deg"] > 0 and p["base_offset_mm"] > 0
     assert abduction(m["modifier"]) > abduction(m["lean_mocap"]) + 0.02
-    # each heel moves out by the modifier's offset (cm): the spacing grows by twice it
+    # each heel moves out by the modifier's offset (mm): the spacing grows by twice it
     grown = base(m["modifier"]) - base(m["lean_mocap"])
-    assert abs(grown - 2 * p["base_offset_cm"] / 100) < 0.05, grown
+    assert abs(grown - 2 * p["base_offset_mm"] / 1000) < 0.01, grown
     # the keyframed stand-in is a different walk altogether (the generator's), not the capture
     assert np.abs(m["keyframed"]["knee.L"] - m["lean_mocap"]["knee.L"]).max() > 0.05
 

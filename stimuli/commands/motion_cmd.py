@@ -53,7 +53,7 @@ def register(subparsers) -> None:
     p.add_argument("--body-fat", type=float, required=True, help="target body fat in %%")
     p.add_argument("--chest", type=float, default=None, help="chest in m (default: interpolated from body fat)")
     p.add_argument("--wthr", type=float, default=None, help="waist-to-hip ratio (default: interpolated)")
-    p.add_argument("--base-scale", type=float, default=1.0, help="multiplies the thesis's walking-base offset")
+    p.add_argument("--base-scale", type=float, default=1.0, help="multiplies the walking-base offset (read in mm; 10 = the thesis script's literal cm)")
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(func=run_modify)
 

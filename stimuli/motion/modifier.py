@@ -39,6 +39,14 @@ def _lerp(a: float, b: float, t: float) -> float:
     return (1 - t) * a + t * b
 
 
+# Units of the walking base. The thesis script labels the regression's walking base "cm" and
+# converts with cmToSi = 0.1, which would put AE's heels 31 cm further out each and a lean walker's
+# step width at 55 cm; normal adult step width is 8-12 cm. Read as millimetres the numbers are
+# physical (lean 5.5 cm, AE 8.6 cm) and so are Table 4-1's heel offsets read as centimetres
+# (-1 ... 4 cm per heel). ``base_scale=10`` restores the script's literal reading.
+WALKING_BASE_UNIT_M = 0.001
+
+
 def thesis_parameters(height_m: float, body_fat_pct: float, chest_m: float | None = None,
                       wthr: float | None = None) -> dict:
     """The modifier's intermediate values and the five modifiers, exactly as the thesis script."""
@@ -54,9 +62,9 @@ def thesis_parameters(height_m: float, body_fat_pct: float, chest_m: float | Non
     bob = -13.19 + 12.04 * height_m
     swing = 18.76 + 0.29 * body_fat_pct
     return {"t": t, "wthr": wthr, "chest_m": chest, "speed_mps": speed, "abduction_deg": abduction,
-            "base_cm": base, "bob_deg": bob, "swing_deg": swing,
+            "base_mm": base, "bob_deg": bob, "swing_deg": swing,
             "speed_ratio": speed / LEAN["speed"], "abduction_offset_deg": abduction - LEAN["abduction"],
-            "base_offset_cm": base - LEAN["base"], "bob_ratio": bob / LEAN["bob"],
+            "base_offset_mm": base - LEAN["base"], "bob_ratio": bob / LEAN["bob"],
             "swing_ratio": swing / LEAN["swing"], "height_scale": height_m / LEAN["height"]}
 
 
@@ -112,7 +120,8 @@ def modify(motion: Motion, height_m: float, body_fat_pct: float, chest_m: float 
             arm = rest[roles[f"{s}_elbow"]] - rest[roles[f"{s}_shoulder"]]
             _scale_arm(rot, roles[f"{s}_shoulder"], sign, p["bob_ratio"], p["swing_ratio"],
                        np.radians(p["abduction_offset_deg"]), arm / np.linalg.norm(arm))
-    rot = _widen_base(m, rot, p["base_offset_cm"] / 100.0 * base_scale)
+    # The regression's walking base is read in millimetres (see WALKING_BASE_UNIT_M).
+    rot = _widen_base(m, rot, p["base_offset_mm"] * WALKING_BASE_UNIT_M * base_scale)
     m = m.replace(rotations=rot)
     if abs(p["speed_ratio"] - 1.0) > 1e-12:
         m = retime(m, p["speed_ratio"])
@@ -128,7 +137,7 @@ def modify(motion: Motion, height_m: float, body_fat_pct: float, chest_m: float 
 # a protocol names rows and the numbers stay data. At MP's height the regression modifier cannot
 # stand in for them: its speed and arm bob depend on height only, so they would not vary at all.
 STRENGTH_BODY_FAT = (0.5, 12.0, 23.5, 35.0, 46.5, 58.0)
-SI_UNIT_M = 0.1  # Appendix D's script: cmToSi = 0.1, i.e. one Softimage unit is 10 cm
+SI_UNIT_M = 0.01  # Table 4-1 heel offsets: one Softimage unit read as 1 cm (see WALKING_BASE_UNIT_M)
 _TWIST = (-0.8, 1.0, 2.8, 4.644041, 6.5, 8.3)
 TABLE_4_1 = {
     # row: (operation, values at STRENGTH_BODY_FAT); "swing" scales a curve about its mean,
