@@ -164,6 +164,20 @@ def _ordered(rows: dict, order: list[str]) -> list[dict]:
     return [rows[sid] for sid in _ordered_ids(rows, order)]
 
 
+def _exit_cleanly_on_sigterm() -> None:
+    """In a worker: turn SIGTERM into SystemExit, so a clip being written deletes its temporary file.
+
+    On Ctrl-C a worker that was idle dies of the interrupt; the pool then terminates the others
+    (SIGTERM), which by default would kill them mid-clip and leave the temporary file behind.
+    """
+    import signal
+
+    def _exit(signum, frame):
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, _exit)
+
+
 def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool, name: str):
     """Yield (stimulus_id, row or None, error or None) as clips finish; Ctrl-C stops cleanly."""
     from tqdm import tqdm
@@ -176,7 +190,8 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
                 bar.update(1)
                 yield result
             return
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
+                                 initializer=_exit_cleanly_on_sigterm) as pool:
             pending = {pool.submit(_worker_job, (protocol, job, *source)) for job in jobs}
             try:
                 while pending:

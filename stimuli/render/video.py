@@ -71,8 +71,14 @@ def write_video(frames, path: str | Path, fps: int, width: int, height: int, n_f
             raise RuntimeError(f"{path.name}: rendered {count} frames, expected {n_frames}")
         os.replace(tmp, path)
     except BaseException:
-        writer.close()
-        tmp.unlink(missing_ok=True)
+        # ffmpeg shares the terminal's process group, so on Ctrl-C it is interrupted too and closing
+        # the writer may raise; the temporary file must go whatever close() does.
+        try:
+            writer.close()
+        except BaseException:
+            pass
+        finally:
+            tmp.unlink(missing_ok=True)
         raise
     return VideoInfo(path, count, sha256_file(path))
 
