@@ -142,15 +142,10 @@ def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
 @functools.lru_cache(maxsize=16)
 def _generated(actor_json: str, gait: str, cadence: float, speed: float, seed: int, fps: float, cycles: int):
     """The generator's looped treadmill gait for an actor (cached per process)."""
-    from stimuli.motion.generate import generate
-    from stimuli.motion.style import params_for_actor
+    from stimuli.motion.style import actor_gait
     from stimuli.protocol import Actor
 
-    actor = Actor.model_validate_json(actor_json)
-    anthro = {k: getattr(actor, k) for k in ("body_fat_pct", "waist_m", "hip_m", "chest_m") if getattr(actor, k)}
-    params = params_for_actor(actor.id, actor.height_m, actor.bmi, actor.sex, gait, cadence, speed, seed=seed,
-                              **anthro)
-    return generate(params, height_m=actor.height_m, fps=fps, cycles=cycles)
+    return actor_gait(Actor.model_validate_json(actor_json), gait, cadence, speed, seed, fps, cycles)
 
 
 def on_rig(motion, body):
