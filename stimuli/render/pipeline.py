@@ -10,6 +10,7 @@ temporary names and renamed, so an interruption never leaves half a file.
 from __future__ import annotations
 
 import os
+import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -19,6 +20,7 @@ from stimuli.errors import StimuliError
 from stimuli.render.clip import Look
 from stimuli.render.manifest import manifest_row, read_manifest, write_manifest
 from stimuli.render.settings import inputs_hash, look_for
+from stimuli.render.video import check_interrupted, install_interrupt_handler
 
 SOURCES = ("protocol", "procedural")
 
@@ -139,13 +141,18 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     out_dir.mkdir(parents=True, exist_ok=True)
     report.manifest = write_manifest(out_dir, _ordered(rows, order))
     workers = max(1, min(workers or min(2, os.cpu_count() or 1), len(todo) or 1))
-    for sid, row, error in _run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
-        if row is not None:
-            rows[sid] = row
-            report.rendered.append(sid)
-            write_manifest(out_dir, _ordered(rows, order))
-        else:
-            report.failed[sid] = error
+    previous_handler = install_interrupt_handler()
+    try:
+        for sid, row, error in _run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
+            if row is not None:
+                rows[sid] = row
+                report.rendered.append(sid)
+                write_manifest(out_dir, _ordered(rows, order))
+            else:
+                report.failed[sid] = error
+    finally:
+        if previous_handler is not None:
+            signal.signal(signal.SIGINT, previous_handler)
     if sheet:
         from stimuli.render.contact import contact_sheet
 
@@ -164,18 +171,22 @@ def _ordered(rows: dict, order: list[str]) -> list[dict]:
     return [rows[sid] for sid in _ordered_ids(rows, order)]
 
 
-def _exit_cleanly_on_sigterm() -> None:
-    """In a worker: turn SIGTERM into SystemExit, so a clip being written deletes its temporary file.
+def _worker_signals() -> None:
+    """In a worker: turn SIGTERM into SystemExit, so a clip being written deletes its temporary file,
+    and make Ctrl-C stick (see ``video.install_interrupt_handler``).
 
     On Ctrl-C a worker that was idle dies of the interrupt; the pool then terminates the others
     (SIGTERM), which by default would kill them mid-clip and leave the temporary file behind.
     """
     import signal
 
+    from stimuli.render.video import install_interrupt_handler
+
     def _exit(signum, frame):
         raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGTERM, _exit)
+    install_interrupt_handler()
 
 
 def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool, name: str):
@@ -186,12 +197,13 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
     try:
         if workers == 1:
             for job in jobs:
+                check_interrupted()
                 result = _worker_job((protocol, job, *source))
                 bar.update(1)
                 yield result
             return
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                                 initializer=_exit_cleanly_on_sigterm) as pool:
+                                 initializer=_worker_signals) as pool:
             pending = {pool.submit(_worker_job, (protocol, job, *source)) for job in jobs}
             try:
                 while pending:

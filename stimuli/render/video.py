@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import signal
+import tempfile
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +43,33 @@ def _temp_name(path: Path, suffix: str) -> Path:
     return path.with_name(f".{path.stem}.{os.getpid()}.tmp{suffix}")
 
 
+_INTERRUPTED = threading.Event()
+
+
+def install_interrupt_handler():
+    """Make Ctrl-C stick: SIGINT sets a flag as well as raising KeyboardInterrupt.
+
+    An interrupt that lands where Python ignores exceptions (the at-fork hooks that run while
+    ffmpeg is being started print "Exception ignored" and go on) is otherwise lost; the frame loop
+    of :func:`write_video` checks the flag and stops at the next frame. Returns the previous
+    handler (for ``signal.signal``), or None outside the main thread, where none can be installed.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    _INTERRUPTED.clear()
+
+    def handler(signum, frame):
+        _INTERRUPTED.set()
+        raise KeyboardInterrupt
+
+    return signal.signal(signal.SIGINT, handler)
+
+
+def check_interrupted() -> None:
+    if _INTERRUPTED.is_set():
+        raise KeyboardInterrupt
+
+
 def check_size(width: int, height: int) -> None:
     """yuv420p needs even sizes; say so instead of letting ffmpeg fail or pad silently."""
     if width % 2 or height % 2 or width < 16 or height < 16:
@@ -53,7 +84,10 @@ def write_video(frames, path: str | Path, fps: int, width: int, height: int, n_f
     check_size(width, height)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temp_name(path, ".mp4")
+    # ffmpeg writes inside a private temporary folder: if it is interrupted while starting up, it can
+    # still create its output after we cleaned up, but not in a folder that no longer exists.
+    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent))
+    tmp = tmp_dir / path.name
     writer = imageio_ffmpeg.write_frames(
         str(tmp), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
         quality=None, macro_block_size=1, ffmpeg_log_level="error",
@@ -62,6 +96,7 @@ def write_video(frames, path: str | Path, fps: int, width: int, height: int, n_f
     try:
         writer.send(None)
         for frame in frames:
+            check_interrupted()
             if count == 0 and poster is not None:
                 write_png(frame, poster)
             writer.send(np.ascontiguousarray(frame))
@@ -70,15 +105,16 @@ def write_video(frames, path: str | Path, fps: int, width: int, height: int, n_f
         if count != n_frames:
             raise RuntimeError(f"{path.name}: rendered {count} frames, expected {n_frames}")
         os.replace(tmp, path)
+        tmp_dir.rmdir()
     except BaseException:
         # ffmpeg shares the terminal's process group, so on Ctrl-C it is interrupted too and closing
-        # the writer may raise; the temporary file must go whatever close() does.
+        # the writer may raise; the temporary folder must go whatever close() does.
         try:
             writer.close()
         except BaseException:
             pass
         finally:
-            tmp.unlink(missing_ok=True)
+            shutil.rmtree(tmp_dir, ignore_errors=True)
         raise
     return VideoInfo(path, count, sha256_file(path))
 
