@@ -8,6 +8,7 @@ Every step is cached or resumable, so a second run takes a fraction of the first
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from stimuli.design import build_design, write_design
@@ -23,19 +24,13 @@ def bundled_protocol(name: str) -> Path:
     return PROTOCOL_DIR / f"{name}.yaml"
 
 
+@contextmanager
 def _step(label: str):
     """Print a step's name and, when it ends, its wall time."""
-    class Step:
-        def __enter__(self):
-            self.start = time.perf_counter()
-            print(f"[{label}] …", flush=True)
-            return self
-
-        def __exit__(self, *exc):
-            if exc[0] is None:
-                print(f"[{label}] done in {time.perf_counter() - self.start:.1f} s", flush=True)
-
-    return Step()
+    start = time.perf_counter()
+    print(f"[{label}] …", flush=True)
+    yield
+    print(f"[{label}] done in {time.perf_counter() - start:.1f} s", flush=True)
 
 
 def run_demo(out: Path, quick: bool = False) -> dict[str, list[Path]]:
