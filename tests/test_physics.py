@@ -267,23 +267,33 @@ def test_knee_extension_moment_is_filtered_and_of_normative_scale(ref_result, wa
     np.testing.assert_allclose(lowpass_periodic(noisy, 1000.0), np.sin(2 * np.pi * t), atol=0.02)
 
 
-def test_knee_flexion_peak_is_the_swing_peak_of_the_bodys_own_reference(walk, bodies):
-    """Point 1 as measured: with gains that track within 3°, the swing peak stays within 1.5° of
-    the body's own reference peak for light and heavy bodies alike (mass changes it < 0.2°),
-    so differences between actors come from how the motion maps onto each body, not from mass."""
+def test_knee_flexion_is_the_joint_centre_angle_and_mass_barely_moves_it(walk, bodies):
+    """Fig. 7's knee flexion is the gait-lab angle between the hip–knee and knee–ankle lines: the
+    reference's curve is the same on a lean and a heavy body (the hinge angle alone differed by up
+    to 1.7° between Exp-2 men from rest-pose geometry). With the shipped gains the simulated swing
+    peak stays within 1.5° of it, and the same body at 49.9 and 90 kg differs by < 0.2° — the
+    paper's "lower flexion for higher BMI" is not a consequence of mass under fixed gains
+    (benchmarks/physics_mass_sweep.py, docs/readme_physics.md)."""
     from stimuli.physics import retarget
-    from stimuli.physics.analysis_fig7 import gait_curves, reference_heel_strike_s
+    from stimuli.physics.analysis_fig7 import gait_curves, knee_flexion_offset_deg, reference_heel_strike_s
 
     hs = reference_heel_strike_s(walk)
-    peaks = {}
+    curves = {}
     for name, weight in (("lo", 49.9), ("hi", 71.9)):
         r = retarget(walk, bodies[name], weight, reference_body=bodies["ref"])
-        c = gait_curves(r.sim, r.ragdoll, 2, hs)
-        own = np.degrees(r.sim.qref[:, r.sim.dof_names.index("knee.L")]).max()
+        c = curves[name] = gait_curves(r.sim, r.ragdoll, 2, hs)
+        knee = r.sim.dof_names.index("knee.L")
+        offset = knee_flexion_offset_deg(r.ragdoll)
+        assert 3.0 < offset < 15.0  # Anny's rest knee centres are not collinear
+        assert c["knee_flexion_peak_deg"] == pytest.approx(
+            np.degrees(r.sim.q[:, knee]).max() + offset, abs=1.0)  # cycle averaging smooths the peak a little
         flex = np.array(c["knee_flexion_deg"])
         assert flex.argmax() > 55 and c["knee_flexion_stance_peak_deg"] < c["knee_flexion_peak_deg"]
-        assert abs(c["knee_flexion_peak_deg"] - own) < 1.5
-        peaks[name] = c["knee_flexion_peak_deg"]
+        assert abs(c["knee_flexion_peak_change_deg"]) < 1.5
+        assert c["knee_flexion_peak_change_deg"] == pytest.approx(
+            c["knee_flexion_peak_deg"] - c["reference_knee_flexion_peak_deg"])
+    np.testing.assert_allclose(curves["lo"]["reference_knee_flexion_deg"], curves["hi"]["reference_knee_flexion_deg"],
+                               atol=0.1)
     heavy = retarget(walk, bodies["lo"], 90.0, reference_body=bodies["ref"])
     c = gait_curves(heavy.sim, heavy.ragdoll, 2, hs)
-    assert abs(c["knee_flexion_peak_deg"] - peaks["lo"]) < 0.2
+    assert abs(c["knee_flexion_peak_deg"] - curves["lo"]["knee_flexion_peak_deg"]) < 0.2

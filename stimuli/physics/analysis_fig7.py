@@ -4,8 +4,16 @@ Per actor, from the recorded simulation (one steady-state pass of the looped cli
 ``n_cycles`` gait cycles): the cycle starts at the reference motion's first left heel strike
 (Zeni's method, ``stimuli.motion.events``; fallback: the first onset of the simulated left foot's
 ground contact) and lasts pass / n_cycles; the pass is periodic, so cycles may wrap around its
-end. Each cycle is resampled to 101 points and the cycles are averaged. Knee flexion is the left
-knee hinge angle (flexion positive). The knee extension moment is the net internal knee moment
+end. Each cycle is resampled to 101 points and the cycles are averaged. Knee flexion is measured
+as gait labs do (CGM): the angle between the thigh (hip → knee joint centre) and shank (knee →
+ankle) lines in the knee's flexion plane, flexion positive — the left knee hinge angle plus the
+body's rest angle between those lines (:func:`knee_flexion_offset_deg`). The hinge angle alone is
+relative to each fitted body's rest pose, whose joint centres are not collinear (6–10° on Anny
+legs, less on heavy ones), so the same motion gave up to 1.7° different hinge peaks on different
+bodies with no physics involved; the joint-centre angle of the reference is the same on every body
+(the segments follow the motion's bone directions). The same measure of the reference (the
+ragdoll posed at its targets) is returned too, so ``knee_flexion_peak_change_deg`` is what the
+simulation — mass — changed. The knee extension moment is the net internal knee moment
 (positive = extensors) divided by body mass: the knee is a bare hinge (no limits, springs or
 contacts below the pelvis act on its DoF except through the feet), so the generalised force that
 inverse dynamics (``mj_inverse``) assigns to it equals minus the knee actuator torque; the
@@ -98,18 +106,49 @@ def gait_curves(sim, ragdoll, n_cycles: int = 2, start_s: float | None = None) -
     knee = sim.dof_names.index("knee.L")
     pelvis_y = sim.pelvis_com[:, 1]
     root = _normalise(sim.times, pelvis_y, spans)
-    flexion = _normalise(sim.times, np.degrees(sim.q[:, knee]), spans)
+    offset = knee_flexion_offset_deg(ragdoll, "L")
+    flexion = _normalise(sim.times, np.degrees(sim.q[:, knee]), spans) + offset
+    reference = _normalise(sim.times, np.degrees(sim.qref[:, knee]), spans) + offset
     raw = -sim.knee_torque[:, 0] / ragdoll.weight_kg
     # The recorded steps cover one periodic pass (its last step closes it): filter without it.
     moment = _normalise(sim.step_times[:-1], lowpass_periodic(raw[:-1], 1.0 / sim.timestep), spans)
     stance = GRID <= STANCE_END
     root_cm = 100 * (root - root.mean())
     return {"root_com_cm": root_cm.tolist(), "knee_flexion_deg": flexion.tolist(),
+            "reference_knee_flexion_deg": reference.tolist(),
             "knee_extension_moment_nm_per_kg": moment.tolist(), "cycles_s": [list(map(float, s)) for s in spans],
             "knee_flexion_peak_deg": float(flexion.max()),
+            "reference_knee_flexion_peak_deg": float(reference.max()),
+            "knee_flexion_peak_change_deg": float(flexion.max() - reference.max()),
             "knee_flexion_stance_peak_deg": float(flexion[stance].max()),
             "knee_extension_moment_peak_nm_per_kg": float(moment[stance].max()),
             "root_com_excursion_cm": float(np.ptp(root_cm) / 2)}
+
+
+def knee_flexion_offset_deg(ragdoll, side: str = "L") -> float:
+    """Rest angle (°) between the thigh and shank joint-centre lines in the knee's flexion plane.
+
+    Both lines are projected onto the plane normal to the knee hinge axis; the signed angle from
+    thigh to shank about that axis (flexion positive) is added to the hinge angle to give the
+    gait-lab knee flexion. Exact for a hinge: rotating about the axis commutes with the projection.
+
+    >>> from types import SimpleNamespace as NS
+    >>> import numpy as np
+    >>> leg = {"upper_leg.L": NS(geom={"fromto": np.array([0, 1.0, 0, 0, 0.5, 0.05])}),
+    ...        "lower_leg.L": NS(geom={"fromto": np.array([0, 0.5, 0.05, 0, 0, 0])}, hinge_axis=np.array([1.0, 0, 0]))}
+    >>> round(knee_flexion_offset_deg(NS(link=leg.get)), 2)
+    11.42
+    """
+    thigh, shank = ragdoll.link(f"upper_leg.{side}"), ragdoll.link(f"lower_leg.{side}")
+    axis = np.asarray(shank.hinge_axis, float)
+    axis = axis / np.linalg.norm(axis)
+    lines = []
+    for link in (thigh, shank):
+        ft = np.asarray(link.geom["fromto"], float)
+        d = ft[3:] - ft[:3]
+        lines.append(d - (d @ axis) * axis)
+    a, b = lines
+    return float(np.degrees(np.arctan2(np.cross(a, b) @ axis, a @ b)))
 
 
 def normative_curves(path: Path = NORMATIVE) -> dict:
@@ -147,6 +186,11 @@ def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normativ
         style = "-" if c.get("sex") == "F" else "--"
         for ax, (key, _) in zip(axes, panels):
             ax.plot(pct, c[key], style, color=shade, label=f"{label} (BMI {c['bmi']:.1f})")
+    # The reference (the NoCOM motion posed on the ragdoll) is the same on every body in the
+    # joint-centre measure: one line shows what the simulation changed.
+    reference = next((c["reference_knee_flexion_deg"] for c in curves.values() if "reference_knee_flexion_deg" in c), None)
+    if reference is not None:
+        axes[2].plot(pct, reference, "k:", lw=1.5, label="reference (NoCOM, kinematic)")
     for ax, key, name in ((axes[3], "knee_extension_moment_nm_per_kg", "Baseline knee moment (N·m/kg)"),
                           (axes[4], "knee_flexion_deg", "Baseline knee flexion (°)")):
         band = normative[key]
@@ -157,6 +201,7 @@ def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normativ
     for ax, (_, name) in zip(axes, panels):
         ax.set_title(name)
     axes[0].legend(fontsize=7)
+    axes[2].legend(fontsize=7)
     for ax in axes:
         ax.set_xlabel("gait cycle (%)")
         ax.set_xlim(0, 100)

@@ -23,7 +23,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-7"
+CODE_VERSION = "physics-8"
 
 
 def cache_dir() -> Path:
@@ -85,8 +85,8 @@ def _job(args: dict) -> dict:
         curves = gait_curves(result.sim, result.ragdoll, int(motion.metadata.get("cycles", 2)),
                              reference_heel_strike_s(motion))
         report["fig7"] = curves
-        for key in ("knee_flexion_peak_deg", "knee_flexion_stance_peak_deg", "knee_extension_moment_peak_nm_per_kg",
-                    "root_com_excursion_cm"):
+        for key in ("knee_flexion_peak_deg", "reference_knee_flexion_peak_deg", "knee_flexion_peak_change_deg",
+                    "knee_flexion_stance_peak_deg", "knee_extension_moment_peak_nm_per_kg", "root_com_excursion_cm"):
             report[key] = curves[key]
         result.motion.metadata.update(actor=args["actor"], gait=args["gait"])
         result.motion.save(args["out_motion"])
@@ -165,6 +165,8 @@ def _summary(reports: list[dict], path: Path) -> None:
              "b_paper_mm": round(r["b_paper_m"] * 1000, 3),
              "tracking_rms_deg": r["tracking_rms_deg_overall"], "nocom_rms_deg": r.get("nocom_rms_deg_mean"),
              "knee_flexion_peak_deg": r.get("knee_flexion_peak_deg"),
+             "reference_knee_flexion_peak_deg": r.get("reference_knee_flexion_peak_deg"),
+             "knee_flexion_peak_change_deg": r.get("knee_flexion_peak_change_deg"),
              "knee_flexion_stance_peak_deg": r.get("knee_flexion_stance_peak_deg"),
              "knee_extension_moment_peak_nm_per_kg": r.get("knee_extension_moment_peak_nm_per_kg"),
              "root_com_excursion_cm": r.get("root_com_excursion_cm"),
