@@ -37,6 +37,8 @@ def register(subparsers) -> None:
     t = sub.add_parser("tune", help="re-find the fixed controller gains on the base character",
                        description="Search the PD gains for the base character and write stimuli/physics/gains.json.")
     t.add_argument("--out", type=Path, default=None, help="gains JSON (default: the package's gains.json)")
+    t.add_argument("--target-rms", type=float, default=None, metavar="DEG",
+                   help="tracking RMS bound for the base character (default 2.5°, a margin under the 3° acceptance)")
     t.set_defaults(func=run_tune)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -100,9 +102,12 @@ def run_protocol(args: argparse.Namespace) -> int:
 
 def run_tune(args: argparse.Namespace) -> int:
     from stimuli.physics.controller import GAINS_FILE
-    from stimuli.physics.tune import tune
+    from stimuli.errors import StimuliError
+    from stimuli.physics.tune import TARGET_RMS_DEG, tune
 
-    gains = tune(out=args.out or GAINS_FILE)
+    if args.target_rms is not None and not 0.0 < args.target_rms < 90.0:
+        raise StimuliError(f"--target-rms: expected degrees between 0 and 90, got {args.target_rms}")
+    gains = tune(target_rms_deg=args.target_rms or TARGET_RMS_DEG, out=args.out or GAINS_FILE)
     print(f"{args.out or GAINS_FILE}: k_p {gains.k_p:g}, k_d {gains.k_d:.1f}, k_pf {gains.k_pf:.0f}, "
           f"k_df {gains.k_df:.0f} (tracking RMS {gains.tuning['best_rms_deg']:.2f}°)")
     return 0

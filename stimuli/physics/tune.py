@@ -3,15 +3,16 @@
 The paper minimised the squared difference between ragdoll and reference joint angles for its
 base character and then fixed the gains for every body. Stiffer is always more accurate, so the
 search is two-stage: (1) the smallest joint stiffness ``k_p`` on a √2 grid whose tracking RMS
-error is within ``target_rms_deg`` (at the damping bound ζ = 0.5, ``k_d = √k_p``) — by default the
-acceptance bound of 3°: tracking better than required only stiffens the controller, and a stiff
-controller moves every body alike; (2) a short bounded
-Nelder–Mead search over the damping and the root force gains (log scale) minimising the tracking
-error at that stiffness. Damping stays within 0.5–1.5 × critical: with the paper's ``−k_d q̇``
+error is within ``target_rms_deg`` (at the damping bound ζ = 0.5, ``k_d = √k_p``) — by default
+2.5°, a margin under the acceptance bound of 3° (:data:`TARGET_RMS_DEG`): tracking better than
+required only stiffens the controller, and a stiff controller moves every body alike; (2) a bounded 1-D search of the damping ``k_d`` within
+0.5–1.5 × critical minimising the tracking error at that stiffness: with the paper's ``−k_d q̇``
 less damping always tracks better (no lag) until the simulation blows up, and the gains must stay
-stable for bodies up to twice the base weight. The root torque gains follow the force gains through a fixed lever arm
-(``k_pr = k_pf·L²``). The result, with the base character's per-DoF inertia profile, goes to
-``stimuli/physics/gains.json`` (absolute units) and is used unchanged for every body.
+stable for bodies up to twice the base weight. The root gains are not searched (a stiff root
+string always tracks best and then carries the body): critically damped springs on the base
+mass (:func:`root_gains`). The result, with the base character's per-DoF inertia profile
+(:func:`stimuli.physics.controller.inertia_profile`), goes to ``stimuli/physics/gains.json``
+(absolute units) and is used unchanged for every body.
 
 Base character: the bundled CMU walk (subject 35, trial 01) on an Anny body of 1.75 m, BMI 23.
 """
@@ -31,10 +32,16 @@ from stimuli.physics.retarget import tracking_rms
 from stimuli.physics.simulate import simulate
 
 BASE = {"sex": "M", "height_m": 1.75, "bmi": 23.0, "motion": "cmu_35_01_walk.bvh", "cycles": 2, "fps": 30.0}
+# The root torque is a critically damped spring of ROOT_TURN_FREQ_HZ on the base mass at this
+# lever arm (moment of inertia m·L²).
 LEVER_M = 0.5
 # Stiffness grid ratio: a finer grid than doubling lands closer to the softest stiffness that
 # tracks (a stiffer controller than needed makes every body move alike).
 GRID_STEP = 2 ** 0.5
+# Tracking bound for the base character, under the acceptance's 3°: the base is another motion
+# (CMU 35_01) on another body than a protocol's reference bodies, which track less well — tuned
+# to 3.0° on the base (k_p 2000), the Exp-2 reference bodies' walks tracked at 3.00° and 3.08°.
+TARGET_RMS_DEG = 2.5
 # Damping ratio of the grid stage (the lower bound of the search): with −k_d q̇ the damping only
 # adds lag, so the grid at critical damping needed twice the stiffness for the same tracking.
 ZETA_MIN = 0.5
@@ -44,6 +51,10 @@ ZETA_MIN = 0.5
 # segment masses matter. (Tuned freely, the root gains ran to their bound: a stiff root string
 # tracks best and makes every body move alike.)
 ROOT_FREQ_HZ = 1.0
+# The root torque's spring is stiffer (2 Hz): at 1 Hz (k_pr ≈ 0.7 kN·m/rad) it was below the
+# toppling stiffness m·g·h of the heavy bodies, which then relied on stiff ankles to stay upright
+# and fell in the jog's flight phases once the ankles were made compliant (STANCE_WEIGHTS).
+ROOT_TURN_FREQ_HZ = 2.0
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
@@ -58,9 +69,10 @@ def base_setup(base: dict = BASE):
     return body, motion
 
 
-def make_gains(k_p: float, k_d: float, k_pf: float, k_df: float, profile: dict, base: dict) -> Gains:
-    return Gains(k_p=k_p, k_d=k_d, k_pf=k_pf, k_df=k_df, k_pr=k_pf * LEVER_M**2, k_dr=k_df * LEVER_M**2,
-                 profile=profile, base=base)
+def make_gains(k_p: float, k_d: float, root: tuple[float, float, float, float], profile: dict, base: dict) -> Gains:
+    """Gains from the joint pair and the root's (k_pf, k_df, k_pr, k_dr) (:func:`root_gains`)."""
+    k_pf, k_df, k_pr, k_dr = root
+    return Gains(k_p=k_p, k_d=k_d, k_pf=k_pf, k_df=k_df, k_pr=k_pr, k_dr=k_dr, profile=profile, base=base)
 
 
 def evaluate(model, ref, ragdoll, gains: Gains) -> float:
@@ -73,13 +85,20 @@ def evaluate(model, ref, ragdoll, gains: Gains) -> float:
     return float(np.sqrt(np.mean(np.square(list(track.values())))))
 
 
-def root_gains(mass_kg: float, freq_hz: float = ROOT_FREQ_HZ) -> tuple[float, float]:
-    """Root force gains (k_pf N/m, k_df N·s/m): a critically damped spring of ``freq_hz`` on ``mass_kg``."""
-    omega = 2 * np.pi * freq_hz
-    return mass_kg * omega**2, 2 * mass_kg * omega
+def root_gains(mass_kg: float, freq_hz: float = ROOT_FREQ_HZ, turn_freq_hz: float = ROOT_TURN_FREQ_HZ,
+               lever_m: float = LEVER_M) -> tuple[float, float, float, float]:
+    """Root gains (k_pf N/m, k_df N·s/m, k_pr N·m/rad, k_dr N·m·s/rad): critically damped springs of
+    ``freq_hz`` on ``mass_kg`` (force) and of ``turn_freq_hz`` on ``mass_kg · lever_m²`` (torque).
+
+    >>> [round(g) for g in root_gains(70.0)]
+    [2763, 880, 2763, 440]
+    """
+    omega, turn = 2 * np.pi * freq_hz, 2 * np.pi * turn_freq_hz
+    inertia = mass_kg * lever_m**2
+    return mass_kg * omega**2, 2 * mass_kg * omega, inertia * turn**2, 2 * inertia * turn
 
 
-def tune(base: dict = BASE, target_rms_deg: float = 3.0, max_evals: int = 12, out: Path | None = GAINS_FILE,
+def tune(base: dict = BASE, target_rms_deg: float = TARGET_RMS_DEG, max_evals: int = 12, out: Path | None = GAINS_FILE,
          progress=print) -> Gains:
     """Run the two-stage search and (optionally) write ``gains.json``."""
     body, motion = base_setup(base)
@@ -87,31 +106,34 @@ def tune(base: dict = BASE, target_rms_deg: float = 3.0, max_evals: int = 12, ou
     ones = {d: 1.0 for d in ragdoll.dof_names}
     model = compile_model(ragdoll, 1e-3, ones, ones)
     profile = inertia_profile(model)
-    k_pf, k_df = root_gains(float(body.anthropometry.mass_kg))
+    root = root_gains(float(body.anthropometry.mass_kg))
     history = []
     k_p = 500.0
     while True:
         k_d = 2 * ZETA_MIN * np.sqrt(k_p)
-        rms = evaluate(model, ref, ragdoll, make_gains(k_p, k_d, k_pf, k_df, profile, base))
-        history.append({"k_p": k_p, "k_d": k_d, "k_pf": k_pf, "k_df": k_df, "rms_deg": rms})
+        rms = evaluate(model, ref, ragdoll, make_gains(k_p, k_d, root, profile, base))
+        history.append({"k_p": k_p, "k_d": k_d, "rms_deg": rms})
         progress(f"k_p {k_p:g}: tracking RMS {rms:.2f}°")
         if rms <= target_rms_deg or k_p >= 64000:
             break
         k_p *= GRID_STEP
 
     def cost(x):
-        g = make_gains(k_p, 2 * ZETA_MIN * np.sqrt(k_p) * np.exp(x), k_pf, k_df, profile, base)
+        g = make_gains(k_p, 2 * ZETA_MIN * np.sqrt(k_p) * np.exp(x), root, profile, base)
         rms = evaluate(model, ref, ragdoll, g)
-        history.append({"k_p": g.k_p, "k_d": g.k_d, "k_pf": g.k_pf, "k_df": g.k_df, "rms_deg": rms})
+        history.append({"k_p": g.k_p, "k_d": g.k_d, "rms_deg": rms})
         progress(f"k_d {g.k_d:.1f}: tracking RMS {rms:.3f}°")
         return rms
 
     res = minimize_scalar(cost, bounds=(0.0, np.log(1.5 / ZETA_MIN)), method="bounded",
                           options={"maxiter": max_evals, "xatol": 0.05})
-    gains = make_gains(k_p, 2 * ZETA_MIN * np.sqrt(k_p) * np.exp(res.x), k_pf, k_df, profile, base)
-    gains.tuning = {"method": "√2 grid on k_p (ζ = 0.5), then bounded search of k_d; root gains: "
-                              f"{ROOT_FREQ_HZ:g}-Hz critically damped spring on the base mass",
-                    "target_rms_deg": target_rms_deg, "best_rms_deg": float(res.fun),
+    # A bounded search never evaluates its bound itself: keep the grid point when it was better.
+    x, best = (res.x, float(res.fun)) if res.fun < rms else (0.0, rms)
+    gains = make_gains(k_p, 2 * ZETA_MIN * np.sqrt(k_p) * np.exp(x), root, profile, base)
+    gains.tuning = {"method": "√2 grid on k_p (ζ = 0.5), then bounded search of k_d; root gains: critically "
+                              f"damped springs on the base mass, {ROOT_FREQ_HZ:g} Hz (force) and "
+                              f"{ROOT_TURN_FREQ_HZ:g} Hz (torque, lever {LEVER_M:g} m)",
+                    "target_rms_deg": target_rms_deg, "best_rms_deg": best,
                     "evaluations": len(history), "history": history}
     gains.base = dict(base, body_id=body.body_id, weight_kg=float(body.anthropometry.mass_kg))
     if out is not None:
