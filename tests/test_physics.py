@@ -225,8 +225,8 @@ def test_pelvis_vertical_excursion_and_drift_are_walking_like(ref_result, walk):
 
 
 def test_heavy_jog_lands_without_bouncing(bodies):
-    """A jog on a body of 1.5× the reference weight: before the compliant ankles, the softer
-    foot contact and the 2-Hz root torque, Exp 2's heavy jogs pumped the pelvis ±7–9 cm with
+    """A jog on a body of 1.5× the reference weight: before the compliant ankles, the more
+    damped foot contact and the 2-Hz root torque, Exp 2's heavy jogs pumped the pelvis ±7–9 cm with
     8–12 N·m/kg knee-moment spikes, and M_Hi2's was not converged in the time step."""
     from stimuli.motion.generate import GaitParams, generate
     from stimuli.physics import retarget
