@@ -186,11 +186,15 @@ def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normativ
         style = "-" if c.get("sex") == "F" else "--"
         for ax, (key, _) in zip(axes, panels):
             ax.plot(pct, c[key], style, color=shade, label=f"{label} (BMI {c['bmi']:.1f})")
-    # The reference (the NoCOM motion posed on the ragdoll) is the same on every body in the
-    # joint-centre measure: one line shows what the simulation changed.
-    reference = next((c["reference_knee_flexion_deg"] for c in curves.values() if "reference_knee_flexion_deg" in c), None)
-    if reference is not None:
-        axes[2].plot(pct, reference, "k:", lw=1.5, label="reference (NoCOM, kinematic)")
+    # The reference (the NoCOM motion posed on the ragdoll) is the same on every body of a sex in
+    # the joint-centre measure: one line per sex shows what the simulation changed.
+    references = {}
+    for c in curves.values():
+        if "reference_knee_flexion_deg" in c:
+            references.setdefault(c.get("sex"), c["reference_knee_flexion_deg"])
+    for sex, reference in references.items():
+        axes[2].plot(pct, reference, ":" if sex != "M" else "-.", color="0.3", lw=1.2,
+                     label=f"reference{f' {sex}' if sex else ''} (NoCOM, kinematic)")
     for ax, key, name in ((axes[3], "knee_extension_moment_nm_per_kg", "Baseline knee moment (N·m/kg)"),
                           (axes[4], "knee_flexion_deg", "Baseline knee flexion (°)")):
         band = normative[key]
