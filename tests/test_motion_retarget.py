@@ -71,6 +71,27 @@ def test_generated_gaits_on_every_actor_body(bodies, actor):
             assert q["flight_pct"] > 5
 
 
+@pytest.mark.parametrize("sex", ["F", "M"])
+def test_exp2_average_motions_stand_on_every_actor_body(bodies, sex):
+    """The NoCOM motions of Exp 2 (DTW averages, no stance metadata) are grounded on each body:
+    stance was judged from the clip's lowest point, which is the rigid toes' push-off dip 3–4 cm
+    below the flat foot, so the men's average walk floated 2 cm with 62 % of frames airborne."""
+    from stimuli.motion.average import protocol_average
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol(Path(__file__).resolve().parents[1] / "protocols" / "exp2_com_vs_average.yaml")
+    for gait in ("walk", "jog"):
+        src = protocol_average(protocol, sex, gait)
+        for actor in (a for a in ACTORS if a[1] == sex):
+            q = motion_quality(retarget(src, bodies[actor[0]]), bodies[actor[0]])
+            check_bounds(q, (actor[0], gait))
+            assert q["float_cm"] <= 0.5, (actor[0], gait, q)
+            if gait == "walk":
+                assert q["flight_pct"] == 0 and q["double_support_pct"] > 10, (actor[0], q)
+            else:
+                assert 5 < q["flight_pct"] < 25, (actor[0], q)
+
+
 def test_retarget_follows_the_source_limbs(bodies, cmu_loops):
     """Bone directions of the retargeted thighs and shins equal the source's."""
     body = bodies["M_Lo1"]
