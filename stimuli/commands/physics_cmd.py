@@ -22,6 +22,8 @@ def register(subparsers) -> None:
                    help="height of the motion's own body (m; default: the motion's metadata, else the target)")
     r.add_argument("--reference-weight", type=float, default=None,
                    help="weight of the motion's own body (kg; default: the motion's metadata, else the target)")
+    r.add_argument("--gait", choices=("walk", "jog"), default=None,
+                   help="which gain set drives the ragdoll (default: the motion's metadata 'gait', else walk)")
     r.add_argument("--out", type=Path, required=True, help="COM motion .npz to write")
     r.add_argument("--report", type=Path, default=None, help="report JSON to write")
     r.set_defaults(func=run_retarget)
@@ -37,6 +39,8 @@ def register(subparsers) -> None:
     t = sub.add_parser("tune", help="re-find the fixed controller gains on the base character",
                        description="Search the PD gains for the base character and write stimuli/physics/gains.json.")
     t.add_argument("--out", type=Path, default=None, help="gains JSON (default: the package's gains.json)")
+    t.add_argument("--gait", choices=("walk", "jog", "all"), default="all",
+                   help="which gait's gains to re-find (base: CMU 35_01 walk / 35_17 run); default all")
     t.add_argument("--target-rms", type=float, default=None, metavar="DEG",
                    help="tracking RMS bound for the base character (default 2.5°, a margin under the 3° acceptance)")
     t.set_defaults(func=run_tune)
@@ -62,6 +66,7 @@ def run_retarget(args: argparse.Namespace) -> int:
     from stimuli.bodies import fit_body
     from stimuli.errors import StimuliError
     from stimuli.motion import Motion
+    from stimuli.physics.controller import Gains, motion_gait
     from stimuli.physics.inertia import check_weight
     from stimuli.physics.retarget import RagdollFellError, retarget
 
@@ -72,7 +77,8 @@ def run_retarget(args: argparse.Namespace) -> int:
     body = fit_body(args.sex, args.height, args.weight / args.height**2)
     ref_body = fit_body(args.sex, ref_h, ref_w / ref_h**2)
     try:
-        result = retarget(motion, body, args.weight, reference_body=ref_body, raise_on_fall=True)
+        gains = Gains.load(gait=args.gait or motion_gait(motion))
+        result = retarget(motion, body, args.weight, reference_body=ref_body, gains=gains, raise_on_fall=True)
     except RagdollFellError as exc:
         if args.report:
             _write_report(args.report, exc.result.report)
@@ -101,13 +107,15 @@ def run_protocol(args: argparse.Namespace) -> int:
 
 
 def run_tune(args: argparse.Namespace) -> int:
-    from stimuli.physics.controller import GAINS_FILE
     from stimuli.errors import StimuliError
-    from stimuli.physics.tune import TARGET_RMS_DEG, tune
+    from stimuli.physics.controller import GAINS_FILE, GAITS
+    from stimuli.physics.tune import TARGET_RMS_DEG, tune_gaits
 
     if args.target_rms is not None and not 0.0 < args.target_rms < 90.0:
         raise StimuliError(f"--target-rms: expected degrees between 0 and 90, got {args.target_rms}")
-    gains = tune(target_rms_deg=args.target_rms or TARGET_RMS_DEG, out=args.out or GAINS_FILE)
-    print(f"{args.out or GAINS_FILE}: k_p {gains.k_p:g}, k_d {gains.k_d:.1f}, k_pf {gains.k_pf:.0f}, "
-          f"k_df {gains.k_df:.0f} (tracking RMS {gains.tuning['best_rms_deg']:.2f}°)")
+    out = args.out or GAINS_FILE
+    gaits = GAITS if args.gait == "all" else (args.gait,)
+    for gait, gains in tune_gaits(gaits, args.target_rms or TARGET_RMS_DEG, out).items():
+        print(f"{out} [{gait}]: k_p {gains.k_p:g}, k_d {gains.k_d:.1f}, k_pf {gains.k_pf:.0f}, "
+              f"k_df {gains.k_df:.0f} (tracking RMS {gains.tuning['best_rms_deg']:.2f}°)")
     return 0

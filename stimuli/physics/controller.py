@@ -22,6 +22,11 @@ import numpy as np
 from stimuli.errors import StimuliError
 
 GAINS_FILE = Path(__file__).with_name("gains.json")
+# One gain set per gait, each tuned once on the base character and kept for every body: a jog's
+# knee moves about twice as fast as a walk's, and the walking gains, whose damping lags fast
+# motion (−k_d q̇), tracked the Exp-2 jogs at 3.4–4.0° (their reference bodies 3.6–3.7°).
+GAITS = ("walk", "jog")
+GAIT_ALIASES = {"run": "jog", "running": "jog", "jogging": "jog", "walking": "walk"}
 
 
 @dataclasses.dataclass
@@ -37,6 +42,7 @@ class Gains:
     profile: dict[str, float]
     base: dict = dataclasses.field(default_factory=dict)
     tuning: dict = dataclasses.field(default_factory=dict)
+    gait: str = "walk"
 
     def joint_gains(self, dof_names: list[str]) -> tuple[dict[str, float], dict[str, float]]:
         """Absolute kp, kd per DoF (N·m/rad, N·m·s/rad)."""
@@ -46,16 +52,42 @@ class Gains:
         return ({d: self.k_p * self.profile[d] for d in dof_names},
                 {d: self.k_d * self.profile[d] for d in dof_names})
 
-    def save(self, path: Path = GAINS_FILE) -> Path:
-        path.write_text(json.dumps(dataclasses.asdict(self), indent=1, sort_keys=True) + "\n")
-        return path
-
     @classmethod
-    def load(cls, path: Path = GAINS_FILE) -> "Gains":
+    def load(cls, path: Path = GAINS_FILE, gait: str = "walk") -> "Gains":
+        """The gain set of ``gait`` (``walk`` or ``jog``; ``run`` is a jog) from a gains file."""
+        key = gait_key(gait)
         try:
-            return cls(**json.loads(Path(path).read_text()))
+            sets = json.loads(Path(path).read_text())
+            return cls(**sets[key], gait=key)
+        except KeyError:
+            raise StimuliError(f"{path}: no controller gains for gait {key!r}; run `shapemotion physics tune`") from None
         except (OSError, ValueError, TypeError) as exc:
             raise StimuliError(f"{path}: cannot read controller gains ({exc}); run `shapemotion physics tune`") from None
+
+
+def gait_key(gait: str | None) -> str:
+    """``walk`` or ``jog`` for a gait name (``run`` → ``jog``); StimuliError otherwise.
+
+    >>> gait_key("run"), gait_key("walk")
+    ('jog', 'walk')
+    """
+    key = GAIT_ALIASES.get(str(gait).lower(), str(gait).lower())
+    if key not in GAITS:
+        raise StimuliError(f"controller gains exist for gaits {', '.join(GAITS)} (or run), not {gait!r}")
+    return key
+
+
+def motion_gait(motion) -> str:
+    """The gait whose gains drive ``motion``: its metadata ``gait`` (generator, averages), else walk."""
+    gait = motion.metadata.get("gait")
+    return gait_key(gait) if gait else "walk"
+
+
+def save_gains(gains: dict[str, Gains], path: Path = GAINS_FILE) -> Path:
+    """Write the per-gait gain sets (``{"walk": Gains, "jog": Gains}``) as one JSON file."""
+    payload = {gait: {k: v for k, v in dataclasses.asdict(g).items() if k != "gait"} for gait, g in gains.items()}
+    Path(path).write_text(json.dumps(payload, indent=1, sort_keys=True) + "\n")
+    return Path(path)
 
 
 # Share of the rest of the body's inertia about a leg joint added to its own (stance support).

@@ -23,7 +23,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-10"
+CODE_VERSION = "physics-11"
 
 
 def cache_dir() -> Path:

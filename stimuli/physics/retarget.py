@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.physics import inertia
-from stimuli.physics.controller import Gains, set_joint_gains
+from stimuli.physics.controller import Gains, motion_gait, set_joint_gains
 from stimuli.physics.output import joint_rms_difference, to_motion
 from stimuli.physics.ragdoll import build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
@@ -39,8 +39,10 @@ class RetargetResult:
 
 def prepare(motion, body, weight_kg: float | None = None, gains: Gains | None = None,
             rate_hz: float = DEFAULT_RATE_HZ):
-    """Reference targets, ragdoll and compiled model with the fixed gains (no simulation yet)."""
-    gains = gains or Gains.load()
+    """Reference targets, ragdoll and compiled model with the fixed gains (no simulation yet).
+
+    ``gains`` default: the shipped set of the motion's gait (:func:`motion_gait`)."""
+    gains = gains or Gains.load(gait=motion_gait(motion))
     ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, weight_kg, axes))
     kp, kd = gains.joint_gains(ragdoll.dof_names)
     model = compile_model(ragdoll, 1.0 / rate_hz, kp, kd)
@@ -101,7 +103,7 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
         "simulated_s": round(sim.simulated_s, 4), "wall_s": round(sim.wall_s, 4),
         "wall_per_simulated": round(sim.wall_s / sim.simulated_s, 4), "timestep_s": sim.timestep,
         "rate_hz": round(1.0 / sim.timestep, 2), "dof": len(ragdoll.dof_names),
-        "gains": {k: getattr(gains, k) for k in ("k_p", "k_d", "k_pf", "k_df", "k_pr", "k_dr")},
+        "gains": dict({k: getattr(gains, k) for k in ("k_p", "k_d", "k_pf", "k_df", "k_pr", "k_dr")}, gait=gains.gait),
     }
     if nocom is not None:
         report["nocom_rms_deg"] = {k: round(v, 3) for k, v in nocom.items()}
@@ -120,7 +122,8 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
-    target body itself, b = 0). With ``raise_on_fall`` a fall raises :class:`RagdollFellError`
+    target body itself, b = 0). ``gains`` default: the shipped set for the motion's gait
+    (metadata ``gait``; walk when it has none). With ``raise_on_fall`` a fall raises :class:`RagdollFellError`
     (its ``.result`` holds the report); otherwise ``result.motion`` is None after a fall.
     The clip is simulated in whole passes, at least ``min_simulated_s`` in all (the paper's 4-s
     clips); the last pass is the COM motion, the ones before it are warm-up.

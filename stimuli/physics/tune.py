@@ -25,13 +25,15 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from stimuli.physics.controller import GAINS_FILE, Gains, inertia_profile, set_joint_gains
+from stimuli.physics.controller import GAINS_FILE, GAITS, Gains, gait_key, inertia_profile, save_gains, set_joint_gains
 from stimuli.physics.ragdoll import build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
 from stimuli.physics.retarget import tracking_rms
 from stimuli.physics.simulate import simulate
 
+# The base character of each gait's gains: the same body, the bundled CMU captures of subject 35.
 BASE = {"sex": "M", "height_m": 1.75, "bmi": 23.0, "motion": "cmu_35_01_walk.bvh", "cycles": 2, "fps": 30.0}
+BASES = {"walk": BASE, "jog": dict(BASE, motion="cmu_35_17_run.bvh")}
 # The root torque is a critically damped spring of ROOT_TURN_FREQ_HZ on the base mass at this
 # lever arm (moment of inertia m·L²).
 LEVER_M = 0.5
@@ -98,9 +100,10 @@ def root_gains(mass_kg: float, freq_hz: float = ROOT_FREQ_HZ, turn_freq_hz: floa
     return mass_kg * omega**2, 2 * mass_kg * omega, inertia * turn**2, 2 * inertia * turn
 
 
-def tune(base: dict = BASE, target_rms_deg: float = TARGET_RMS_DEG, max_evals: int = 12, out: Path | None = GAINS_FILE,
-         progress=print) -> Gains:
-    """Run the two-stage search and (optionally) write ``gains.json``."""
+def tune(gait: str = "walk", target_rms_deg: float = TARGET_RMS_DEG, max_evals: int = 12, progress=print) -> Gains:
+    """Run the two-stage search for one gait on its base character (:data:`BASES`)."""
+    gait = gait_key(gait)
+    base = BASES[gait]
     body, motion = base_setup(base)
     ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, None, axes))
     ones = {d: 1.0 for d in ragdoll.dof_names}
@@ -113,7 +116,7 @@ def tune(base: dict = BASE, target_rms_deg: float = TARGET_RMS_DEG, max_evals: i
         k_d = 2 * ZETA_MIN * np.sqrt(k_p)
         rms = evaluate(model, ref, ragdoll, make_gains(k_p, k_d, root, profile, base))
         history.append({"k_p": k_p, "k_d": k_d, "rms_deg": rms})
-        progress(f"k_p {k_p:g}: tracking RMS {rms:.2f}°")
+        progress(f"{gait}: k_p {k_p:g}: tracking RMS {rms:.2f}°")
         if rms <= target_rms_deg or k_p >= 64000:
             break
         k_p *= GRID_STEP
@@ -122,7 +125,7 @@ def tune(base: dict = BASE, target_rms_deg: float = TARGET_RMS_DEG, max_evals: i
         g = make_gains(k_p, 2 * ZETA_MIN * np.sqrt(k_p) * np.exp(x), root, profile, base)
         rms = evaluate(model, ref, ragdoll, g)
         history.append({"k_p": g.k_p, "k_d": g.k_d, "rms_deg": rms})
-        progress(f"k_d {g.k_d:.1f}: tracking RMS {rms:.3f}°")
+        progress(f"{gait}: k_d {g.k_d:.1f}: tracking RMS {rms:.3f}°")
         return rms
 
     res = minimize_scalar(cost, bounds=(0.0, np.log(1.5 / ZETA_MIN)), method="bounded",
@@ -130,16 +133,27 @@ def tune(base: dict = BASE, target_rms_deg: float = TARGET_RMS_DEG, max_evals: i
     # A bounded search never evaluates its bound itself: keep the grid point when it was better.
     x, best = (res.x, float(res.fun)) if res.fun < rms else (0.0, rms)
     gains = make_gains(k_p, 2 * ZETA_MIN * np.sqrt(k_p) * np.exp(x), root, profile, base)
+    gains.gait = gait
     gains.tuning = {"method": "√2 grid on k_p (ζ = 0.5), then bounded search of k_d; root gains: critically "
                               f"damped springs on the base mass, {ROOT_FREQ_HZ:g} Hz (force) and "
                               f"{ROOT_TURN_FREQ_HZ:g} Hz (torque, lever {LEVER_M:g} m)",
                     "target_rms_deg": target_rms_deg, "best_rms_deg": best,
                     "evaluations": len(history), "history": history}
     gains.base = dict(base, body_id=body.body_id, weight_kg=float(body.anthropometry.mass_kg))
-    if out is not None:
-        gains.save(out)
     return gains
 
 
-def as_dict(gains: Gains) -> dict:
-    return dataclasses.asdict(gains)
+def tune_gaits(gaits=GAITS, target_rms_deg: float = TARGET_RMS_DEG, out: Path | None = GAINS_FILE,
+               progress=print) -> dict[str, Gains]:
+    """Tune the given gaits and write them (with the other gaits' sets already in ``out``)."""
+    tuned = {gait_key(g): tune(g, target_rms_deg, progress=progress) for g in gaits}
+    if out is None:
+        return tuned
+    sets = {}
+    for gait in GAITS:
+        if gait in tuned:
+            sets[gait] = tuned[gait]
+        elif Path(out).is_file():
+            sets[gait] = Gains.load(out, gait)
+    save_gains(sets, out)
+    return tuned
