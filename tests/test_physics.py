@@ -179,6 +179,20 @@ def test_protocol_step_exp2(run_cli, protocol_path, tmp_path):
         gap = (g.weight_kg - g.reference_weight_kg).abs()
         assert np.all(np.diff(g.b_mm.to_numpy()[np.argsort(gap.to_numpy())]) >= -1e-3)
     assert (tmp_path / "fig7_walk.png").is_file() and (tmp_path / "fig7_jog.svg").is_file()
+    # The NoCOM (and so COM) motions hold the whole cycles that fill the 4-s clip, so the renderer
+    # keeps the walk/jog cadences (a 2-cycle jog loop played twice ran at the walk's 120 steps/min).
+    from stimuli.motion import Motion
+    from stimuli.render.sources import fit_loop
+
+    shown = {}
+    for gait, cycles in (("walk", 4), ("jog", 5)):
+        nocom = Motion.load(tmp_path / "nocom" / f"F_{gait}.npz")
+        com = Motion.load(tmp_path / "motions" / f"COM_F_Hi1_{gait}.npz")
+        assert nocom.metadata["cycles"] == cycles and com.n_frames == nocom.n_frames
+        scale = fit_loop(nocom.rotations, nocom.root_translation, nocom.fps, 120, 30.0)[2]
+        assert abs(scale - 1) < 0.1
+        shown[gait] = nocom.metadata["cadence_spm"] * scale
+    assert shown["jog"] / shown["walk"] == pytest.approx(138 / 112, rel=0.05)
 
 
 # --- Acceptance points of the second pass: ground contact (2), knee moment (3), knee flexion (1) ---

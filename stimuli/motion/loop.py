@@ -8,6 +8,7 @@
   the last frame continue into the first in both pose and velocity; the duplicate end frame is
   dropped so that playing the clip on repeat has no seam.
 * :func:`seam_error` measures how smooth the wrap-around is compared with the clip's interior.
+* :func:`cycles_for_clip` is the whole number of gait cycles that best fills a clip.
 """
 
 from __future__ import annotations
@@ -133,6 +134,20 @@ def repeat(motion: Motion, times: int) -> Motion:
     out = motion.replace(rotations=rot, root_translation=root)
     out.metadata["cycles"] = int(motion.metadata.get("cycles", 1)) * times
     return out
+
+
+def cycles_for_clip(duration_s: float, cadence_spm: float) -> int:
+    """Whole gait cycles (two steps each) closest to filling ``duration_s`` at ``cadence_spm``.
+
+    A looping clip holds whole cycles, so the renderer retimes the motion by the rounding (walk
+    112 steps/min in 4 s: 4 cycles, played 7 % fast; jog 138: 5 cycles, 9 % fast). A motion made
+    with another number of cycles is retimed further: a 2-cycle jog loop played twice in 4 s
+    runs 13 % slow, at the walk's 120 steps/min.
+
+    >>> cycles_for_clip(4.0, 112), cycles_for_clip(4.0, 138)
+    (4, 5)
+    """
+    return max(1, int(round(duration_s * cadence_spm / 120.0)))
 
 
 def make_loop(motion: Motion, cycles: int | None = None, treadmill: bool = True) -> Motion:

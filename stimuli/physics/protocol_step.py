@@ -1,12 +1,12 @@
 """All COM motions of a protocol (Experiment 2): every actor × gait, cached, two processes.
 
-For each sex × gait the NoCOM motion is the average motion ``<motions>/<sex>_<gait>.npz`` when a
-motions folder is given (the motions step's DTW averages); otherwise the built-in generator's
-walk/jog for the sex's reference body stands in (documented fallback, metadata says so). The
-reference body (for b) is the body the NoCOM motion belongs to: its metadata ``height_m``/``bmi``
-when present, else the mean height and BMI of the protocol's test actors of that sex. Each COM
-motion is cached under ``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the
-gains file and the code version, so a second run only copies files.
+For each sex × gait the NoCOM motion is ``<motions>/<sex>_<gait>.npz`` when a motions folder is
+given, otherwise the DTW average of the protocol's test actors of that sex over the whole number
+of gait cycles that fills the clip. The reference body (for b) is the body the NoCOM motion
+belongs to: its metadata ``height_m``/``bmi`` when present, else the mean height and BMI of the
+protocol's test actors of that sex. Each COM motion is cached under
+``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the gains file and the code
+version, so a second run only copies files.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-11"
+CODE_VERSION = "physics-12"
 
 
 def cache_dir() -> Path:
@@ -45,9 +45,12 @@ def reference_targets(protocol, sex: str, motion=None) -> tuple[float, float]:
 
 def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
     """The NoCOM motion of a sex × gait: ``<motions_dir>/<sex>_<gait>.npz`` when given, else the DTW
-    average of the protocol's test actors of that sex (``stimuli.motion.average.protocol_average``)."""
+    average of the protocol's test actors of that sex (``stimuli.motion.average.protocol_average``)
+    over the whole number of gait cycles that fills the protocol's clip (as Exp 1's motions): the
+    renderer plays whole loops, and a 2-cycle jog loop filled 4 s at 120 instead of 138 steps/min."""
     from stimuli.motion import Motion
     from stimuli.motion.average import protocol_average
+    from stimuli.motion.loop import cycles_for_clip
 
     if motions_dir is not None:
         path = Path(motions_dir) / f"{sex}_{gait}.npz"
@@ -55,7 +58,8 @@ def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
             raise StimuliError(f"{path}: NoCOM average motion for sex {sex}, gait {gait} not found "
                                f"(expected <motions>/<sex>_<gait>.npz)")
         return Motion.load(path)
-    return protocol_average(protocol, sex, gait)
+    cycles = cycles_for_clip(protocol.clip.duration_s, protocol.gaits[gait].cadence_spm) if gait in protocol.gaits else None
+    return protocol_average(protocol, sex, gait, cycles=cycles)
 
 
 def _key(motion_path: Path, actor: dict, gains_text: str) -> str:

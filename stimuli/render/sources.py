@@ -19,6 +19,7 @@ import functools
 import numpy as np
 
 from stimuli.errors import StimuliError
+from stimuli.motion.loop import cycles_for_clip
 from stimuli.render.clip import Figure, Look
 
 
@@ -130,7 +131,7 @@ def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
     if gait not in protocol.gaits:
         raise StimuliError(f"{protocol.name}: gaits.{gait} is not declared (cadence and speed are needed)")
     spec = protocol.gaits[gait]
-    cycles = max(1, int(round(look.duration_s * spec.cadence_spm / 120.0)))
+    cycles = cycles_for_clip(look.duration_s, spec.cadence_spm)
     motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
                         float(look.fps), cycles)
     on_body = on_rig(motion, body)
