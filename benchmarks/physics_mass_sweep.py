@@ -30,11 +30,14 @@ def main() -> None:
 
     from stimuli.bodies import fit_body
     from stimuli.motion.average import protocol_average
+    from stimuli.motion.loop import cycles_for_clip
     from stimuli.physics import Gains, retarget
     from stimuli.physics.analysis_fig7 import gait_curves, reference_heel_strike_s
     from stimuli.protocol import load_protocol
 
-    motion = protocol_average(load_protocol(PROTOCOL), sex, "walk")
+    protocol = load_protocol(PROTOCOL)
+    cycles = cycles_for_clip(protocol.clip.duration_s, protocol.gaits["walk"].cadence_spm)
+    motion = protocol_average(protocol, sex, "walk", cycles=cycles)  # as the physics step makes it
     body = fit_body(sex, motion.metadata["height_m"], motion.metadata["bmi"])
     own = float(body.anthropometry.mass_kg)
     start = reference_heel_strike_s(motion)
