@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from stimuli.errors import StimuliError
 
@@ -221,11 +221,18 @@ class Protocol(Strict):
     analysis: Analysis
     consent: str = ""
     source: str = ""
+    _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
     def _consistent(self) -> "Protocol":
         check_consistency(self)
         return self
+
+    @property
+    def folder(self) -> Path:
+        """Where relative file paths in the protocol's settings start: the protocol file's folder
+        (:func:`load_protocol`), or the working directory for a protocol parsed from text."""
+        return self._folder or Path.cwd()
 
     # -- look-ups -------------------------------------------------------------------------------
     def factor(self, name: str) -> Factor:
@@ -341,7 +348,9 @@ def load_protocol(path: str | Path) -> Protocol:
         raise StimuliError(f"{path}: protocol file not found") from None
     except (UnicodeDecodeError, IsADirectoryError) as exc:
         raise StimuliError(f"{path}: cannot read the protocol as UTF-8 text ({exc})") from None
-    return parse_protocol(text, source=str(path))
+    protocol = parse_protocol(text, source=str(path))
+    protocol._folder = path.resolve().parent
+    return protocol
 
 
 def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:

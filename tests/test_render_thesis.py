@@ -195,15 +195,19 @@ def test_validation_row_missing_obese_capture_names_the_setting(protocol_path, t
 
 
 def test_validation_row_renders_the_sources_on_ae(protocol_path, tmp_path, monkeypatch):
-    """With a capture for obese_mocap (here the bundled walk, relative to the working directory),
-    the row renders; the three shipped sources move AE differently."""
+    """With a capture for obese_mocap (here the bundled walk, given relative to the protocol file
+    and rendered from another working directory), the row renders; the sources move AE differently."""
+    import shutil
+
     from stimuli.render import render_protocol
     from stimuli.render.thesis_sources import BASE_WALK
     from stimuli.render.video import read_video
 
+    (tmp_path / "captures").mkdir()
+    shutil.copy(BASE_WALK, tmp_path / "captures" / "obese.bvh")
     monkeypatch.chdir(BASE_WALK.parent)
     src = _short_copy(protocol_path("thesis_validation"), tmp_path / "v.yaml",
-                      obese_mocap={"motion": f"bvh:{BASE_WALK.name}"})
+                      obese_mocap={"motion": "bvh:captures/obese.bvh"})
     report = render_protocol(src, tmp_path / "out", resolution="320x120", fps=5, workers=1, progress=False,
                              sheet=False)
     assert len(report.rendered) == 1 and not report.failed
@@ -253,4 +257,4 @@ def test_bvh_capture_is_part_of_the_inputs_hash(protocol_path, tmp_path):
                       obese_mocap={"motion": "bvh:captures/obese.bvh"})
     protocol = load_protocol(src)
     files = motion_files(protocol, _stimulus(protocol, "lean_mocap"))
-    assert [str(f) for f in files] == ["captures/obese.bvh"]
+    assert files == [tmp_path.resolve() / "captures" / "obese.bvh"]  # relative to the protocol file

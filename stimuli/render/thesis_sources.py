@@ -12,7 +12,7 @@ to act on, whereas the generator's walk already carries anthropometric trends an
   the body: ``lean_walk`` (the base walk), ``modifier`` (the base walk through the five-parameter
   modifier with the body actor's height, body fat, chest and waist/hip), ``generator`` (the motion
   generator's walk for the body actor, ``actor_gait``: the stand-in for a hand-keyframed walk) or
-  ``bvh:<path>`` (a capture of your own; relative paths from the working directory).
+  ``bvh:<path>`` (a capture of your own; relative paths start from the protocol file's folder).
 """
 
 from __future__ import annotations
@@ -114,12 +114,19 @@ def source_motion(protocol, stimulus, level: str, body, look: Look):
                        f"expected one of {', '.join(MOTION_KINDS)}")
 
 
+def capture_file(protocol, spec: str) -> Path:
+    """The path a ``bvh:<path>`` setting names; a relative path starts from the protocol's folder."""
+    path = Path(spec[len("bvh:"):].strip()).expanduser()
+    return path if path.is_absolute() else protocol.folder / path
+
+
 def captured_path(protocol, factor, level: str, spec: str) -> Path:
     """The file of a ``bvh:<path>`` motion setting; it must exist."""
-    path = Path(spec[len("bvh:"):].strip()).expanduser()
+    path = capture_file(protocol, spec)
     if not path.is_file():
         raise MissingSource(f"{protocol.name}: factors.{factor.name}.level_settings.{level}.motion: "
-                            f"{path} not found (a BVH capture; relative paths start from {Path.cwd()})")
+                            f"{path} not found (a BVH capture; relative paths start from the protocol's "
+                            f"folder {protocol.folder})")
     return path
 
 
@@ -142,12 +149,13 @@ def modified_walk(actor, body, base_scale: float = 1.0):
 def generated_walk(protocol, actor, look: Look):
     """The generator's walk for the actor (its anthropometric trends: wider base, abducted arms …),
     at the protocol's walk cadence or, without one, the base walk's; speed from the trends."""
+    from stimuli.motion.loop import cycles_for_clip
     from stimuli.motion.style import actor_gait
 
     spec = protocol.gaits.get("walk")
     cadence = spec.cadence_spm if spec else float(_looped_bvh(str(BASE_WALK)).metadata["cadence_spm"])
     speed = spec.speed_mps if spec else None
-    cycles = max(1, int(round(look.duration_s * cadence / 120.0)))
+    cycles = cycles_for_clip(look.duration_s, cadence)
     return actor_gait(actor, "walk", cadence, speed, protocol.seed, float(look.fps), cycles)
 
 
@@ -158,4 +166,4 @@ def source_files(protocol, stimulus) -> list[Path]:
         return []
     levels = stimulus.arrangement or factor.levels[:1]
     specs = [str(_setting(factor, level, "motion") or "") for level in levels]
-    return [Path(s[len("bvh:"):].strip()).expanduser() for s in specs if s.startswith("bvh:")]
+    return [capture_file(protocol, s) for s in specs if s.startswith("bvh:")]
