@@ -193,6 +193,16 @@ def test_protocol_step_exp2(run_cli, protocol_path, tmp_path):
         assert abs(scale - 1) < 0.1
         shown[gait] = nocom.metadata["cadence_spm"] * scale
     assert shown["jog"] / shown["walk"] == pytest.approx(138 / 112, rel=0.05)
+    # What the clips show: both METHOD motions retargeted onto the heaviest man stand on the belt.
+    from stimuli.bodies import fit_body
+    from stimuli.motion.quality import motion_quality
+    from stimuli.motion.retarget import retarget as onto_body
+
+    body = fit_body("M", 1.83, 35.8)
+    for name in ("nocom/M_walk", "motions/COM_M_Hi2_walk", "nocom/M_jog", "motions/COM_M_Hi2_jog"):
+        q = motion_quality(onto_body(Motion.load(tmp_path / f"{name}.npz"), body), body)
+        assert q["float_cm"] < 0.5 and q["penetrate_cm"] < 0.5 and q["skate_pct"] < 5, (name, q)
+        assert q["flight_pct"] == 0 if "walk" in name else 5 < q["flight_pct"] < 30, (name, q)
 
 
 # --- Acceptance points of the second pass: ground contact (2), knee moment (3), knee flexion (1) ---
