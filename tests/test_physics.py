@@ -359,3 +359,14 @@ def test_knee_flexion_is_the_joint_centre_angle_and_mass_barely_moves_it(walk, b
     heavy = retarget(walk, bodies["lo"], 90.0, reference_body=bodies["ref"])
     c = gait_curves(heavy.sim, heavy.ragdoll, 2, hs)
     assert abs(c["knee_flexion_peak_deg"] - curves["lo"]["knee_flexion_peak_deg"]) < 0.2
+
+
+@pytest.mark.parametrize("module", ["stimuli.physics.analysis_fig7", "stimuli.physics.controller", "stimuli.physics.inertia",
+                                    "stimuli.physics.protocol_step", "stimuli.physics.retarget", "stimuli.physics.tune",
+                                    "stimuli.motion.loop"])
+def test_docstring_examples(module):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(module))
+    assert result.attempted > 0 and result.failed == 0

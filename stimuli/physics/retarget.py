@@ -2,10 +2,14 @@
 
 Examples
 --------
->>> from stimuli.bodies import fit_body                                  # doctest: +SKIP
->>> from stimuli.motion import Motion
->>> result = retarget(Motion.load("walk_F.npz"), fit_body("F", 1.60, 28.1))
->>> result.motion.save("walk_F_Hi1_COM.npz"); result.report["b_m"], result.report["fell"]
+>>> from stimuli.bodies import fit_body
+>>> from stimuli.motion.generate import GaitParams, generate
+>>> walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.60, fps=30, cycles=2)
+>>> result = retarget(walk, fit_body("F", 1.60, 28.1))     # its own body: b = 0
+>>> result.report["fell"], result.report["b_m"], result.report["gains"]["gait"]
+(False, 0.0, 'walk')
+>>> result.motion.n_frames == walk.n_frames
+True
 """
 
 from __future__ import annotations
