@@ -5,8 +5,9 @@ base character and then fixed the gains for every body. Stiffer is always more a
 search is two-stage: (1) the smallest joint stiffness ``k_p`` on a √2 grid whose tracking RMS
 error is within ``target_rms_deg`` (at the damping bound ζ = 0.5, ``k_d = √k_p``) — by default
 2.5°, a margin under the acceptance bound of 3° (:data:`TARGET_RMS_DEG`): tracking better than
-required only stiffens the controller, and a stiff controller moves every body alike; (2) a bounded 1-D search of the damping ``k_d`` within
-0.5–1.5 × critical minimising the tracking error at that stiffness: with the paper's ``−k_d q̇``
+required only stiffens the controller, and a stiff controller moves every body alike; (2) a
+bounded 1-D search of the damping ``k_d`` within 0.5–1.5 × critical minimising the tracking
+error at that stiffness: with the paper's ``−k_d q̇``
 less damping always tracks better (no lag) until the simulation blows up, and the gains must stay
 stable for bodies up to twice the base weight. The root gains are not searched (a stiff root
 string always tracks best and then carries the body): critically damped springs on the base
@@ -14,12 +15,12 @@ mass (:func:`root_gains`). The result, with the base character's per-DoF inertia
 (:func:`stimuli.physics.controller.inertia_profile`), goes to ``stimuli/physics/gains.json``
 (absolute units) and is used unchanged for every body.
 
-Base character: the bundled CMU walk (subject 35, trial 01) on an Anny body of 1.75 m, BMI 23.
+Base character, one per gait (:data:`BASES`): an Anny body of 1.75 m, BMI 23, with the bundled CMU
+walk (subject 35, trial 01) for the walking gains and the CMU run (trial 17) for the jogging ones.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
