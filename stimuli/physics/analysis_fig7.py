@@ -32,7 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-NORMATIVE = Path("/work/shared/data/normative/CGM23.json")
 GRID = np.linspace(0.0, 1.0, 101)
 # Low-pass cutoff for joint moments (Hz): the usual 6–10 Hz of gait kinetics.
 MOMENT_CUTOFF_HZ = 8.0
@@ -151,13 +150,21 @@ def knee_flexion_offset_deg(ragdoll, side: str = "L") -> float:
     return float(np.degrees(np.arctan2(np.cross(a, b) @ axis, a @ b)))
 
 
-def normative_curves(path: Path = NORMATIVE) -> dict:
-    """Knee flexion (deg) and knee extension moment (N·m/kg) bands, 101 samples: mean, low, high."""
-    data = json.loads(Path(path).read_text())["CGM23"]["Spont"]
+def normative_curves() -> dict:
+    """Knee flexion (deg) and knee extension moment (N·m/kg) bands, 101 samples: mean, low, high.
+
+    From the bundled CGM2.3 data (:mod:`stimuli.motion.normative`), moments N·mm/kg → N·m/kg.
+
+    >>> band = normative_curves()["knee_flexion_deg"]
+    >>> len(band["mean"]), round(max(band["mean"]), 1)
+    (101, 65.1)
+    """
+    from stimuli.motion.normative import band
+
     out = {}
     for key, name, scale in (("knee_flexion_deg", "KneeAngles", 1.0), ("knee_extension_moment_nm_per_kg", "KneeMoment", 1e-3)):
-        rows = np.asarray(data[name]["X"], float)
-        low, high = rows[:, 1] * scale, rows[:, 2] * scale
+        _, low, high = band(name, "X")
+        low, high = low * scale, high * scale
         out[key] = {"low": low.tolist(), "high": high.tolist(), "mean": ((low + high) / 2).tolist()}
     return out
 

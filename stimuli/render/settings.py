@@ -64,16 +64,16 @@ def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False)
 
 @functools.lru_cache(maxsize=1)
 def upstream_digest() -> str:
-    """SHA-256 of the code that makes bodies and motions (and the renderer's own shaders).
+    """SHA-256 of the code and bundled data that make bodies and motions (and the renderer's shaders).
 
     A change to the generator, the retargeting or the body fitter changes every clip's inputs,
     so a resumed render does not keep clips made by the old code.
     """
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
-    for folder in ("bodies", "motion", "physics", "render/shaders"):
+    for folder in ("bodies", "motion", "physics", "data", "render/shaders"):
         for path in sorted((root / folder).glob("*")):
-            if path.suffix in (".py", ".json", ".vert", ".frag"):
+            if path.suffix in (".py", ".json", ".bvh", ".vert", ".frag"):
                 digest.update(path.name.encode() + path.read_bytes())
     return digest.hexdigest()
 
