@@ -7,7 +7,9 @@ lowest point changes (heel → ball during roll-over) the new point is anchored 
 foot rolls instead of sliding. The ankle target that results is reached with analytic two-bone IK
 on hip and knee (Holden's formulation), keeping the foot's orientation; targets blend in and out
 over a few frames around each contact. Outside contact, a foot that would go below the ground is
-lifted. If a target is out of reach the pelvis is lowered just enough (smoothly, over the loop).
+lifted. If a target is out of reach the heel rises about the planted ball or toe
+(:func:`rise_heel`), and only then is the pelvis lowered just enough (smoothly, over the loop); a
+swinging foot comes down with the pelvis.
 """
 
 from __future__ import annotations
@@ -21,6 +23,13 @@ from stimuli.motion.skeleton import role_indices
 
 SIDES = ("l", "r")
 PIVOT_SWITCH_M = 0.002
+# Share of thigh + shank the leg IK may use (a locked knee has no bend plane).
+REACH_FRACTION = 0.995
+# Largest heel rise (foot turned about its ball or toe) used to reach a trailing footprint;
+# push-off plantarflexion is 15-20° in walking and more in running.
+MAX_HEEL_RISE_DEG = 35.0
+# Shape of the swing clearance's descent (see swing_clearance).
+LANDING_POWER = 0.75
 
 
 def sole_points(motion: Motion, floor_y: float | None = None) -> dict[str, list[tuple[int, np.ndarray]]]:
@@ -113,8 +122,15 @@ def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, belt: np.ndarray,
-                    fps: float, blend: int = 4, cyclic: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Ankle targets (T×3) and blend weights (T) for one foot (see the module docstring)."""
+                    fps: float, blend: int = 4, cyclic: bool = True,
+                    follow: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ankle targets (T×3), blend weights (T) and the planted sole point of each contact frame (T:
+    index into the foot's sole points, −1 out of contact) for one foot (see the module docstring).
+
+    In contact the targets come from ``sole`` and ``ankle``; the frames around a contact carry
+    the correction at its first or last frame on the ankle path ``follow`` (default ``ankle``):
+    the motion being cleaned, when the footprints come from a reference pose.
+    """
     t_n = len(contact)
     shift = 0
     if cyclic and contact.all():
@@ -124,8 +140,10 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
         shift = int(np.argmin(contact))  # first frame out of contact becomes frame 0
     roll = lambda x: np.roll(x, -shift, axis=0)  # noqa: E731
     sole_r, ankle_r, c_r = roll(sole), roll(ankle), roll(contact)
+    follow_r = ankle_r if follow is None else roll(follow)
     target = ankle_r.copy()
     weight = np.zeros(t_n)
+    pivots = np.full(t_n, -1)
     step = belt / fps
     for s, e in _intervals(c_r):
         anchor, pivot = None, -1
@@ -141,7 +159,7 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
                 anchor = target[t - 1] + (sole_r[t - 1, k] - ankle_r[t - 1]) + step
             else:
                 anchor = anchor + step
-            pivot = k
+            pivot = pivots[t] = k
             anchor[1] = 0.0
             target[t] = anchor - offsets[k]
             weight[t] = 1.0
@@ -152,14 +170,22 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
             w = 0.5 * (1 + np.cos(np.pi * d / (blend + 1)))
             for t, ref in ((s - d, s), (e - 1 + d, e - 1)):
                 if 0 <= t < t_n and weight[t] < w:
-                    target[t] = ankle_r[t] + (target[ref] - ankle_r[ref])
+                    target[t] = follow_r[t] + (target[ref] - follow_r[ref])
                     weight[t] = w
     unroll = lambda x: np.roll(x, shift, axis=0)  # noqa: E731
-    return unroll(target), unroll(weight)
+    return unroll(target), unroll(weight), unroll(pivots)
 
 
 def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
-    """Minimum height of the lowest sole point over each swing: ``height``·sin(π·progress)."""
+    """Minimum height of the lowest sole point over each swing, peaking at ``height`` mid-swing.
+
+    The foot leaves the ground steeply (a square-rooted half sine: no toe grazing the belt after
+    push-off) and comes down more gently (the half sine to the power :data:`LANDING_POWER`): the
+    leg is almost straight then, and every cm of lift late in swing costs many degrees of knee
+    flexion. The square-rooted landing held a walk's knee at 47–51° just before heel strike
+    (CGM2.3: 6–21°); a plain or squared sine let the heel graze the belt (up to 8 % of frames
+    skating).
+    """
     out = np.zeros(len(contact))
     if height <= 0 or contact.all() or not contact.any():
         return out
@@ -167,8 +193,8 @@ def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
     c = np.roll(contact, -shift)
     for s, e in _intervals(~c):
         u = (np.arange(s, e) - s + 1) / (e - s + 1)
-        # A square-rooted half sine: the foot leaves and meets the ground steeply, not grazing it.
-        out[s:e] = height * np.sqrt(np.sin(np.pi * u))
+        rise = np.sin(np.pi * u)
+        out[s:e] = height * np.where(u < 0.5, np.sqrt(rise), rise**LANDING_POWER)
     return np.roll(out, shift)
 
 
@@ -191,31 +217,38 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     for it in range(iterations):
         grot, gpos = motion.global_transforms(rot, root)
         rgrot, rgpos = (grot, gpos) if reference is None or it > 0 else reference.global_transforms()
-        targets = {}
+        targets, feet, free, lows = {}, {}, {}, {}
         for s in SIDES:
             ankle = gpos[:, roles[f"{s}_ankle"]]
             sole = sole_positions(grot, gpos, points[s])
             rsole = sole_positions(rgrot, rgpos, points[s])
             rankle = rgpos[:, roles[f"{s}_ankle"]]
-            tgt, w = contact_targets(rsole, rankle, contacts[s], belt, motion.fps, cyclic=cyclic)
-            tgt = rankle + w[:, None] * (tgt - rankle)
-            # Out of contact the foot follows the motion (blended near contacts from the reference).
-            tgt = np.where(w[:, None] > 0, tgt, ankle)
-            # Never below the ground, in or out of contact; clear it in swing.
-            low = sole[:, :, 1].min(axis=1) + (tgt[:, 1] - ankle[:, 1])
-            floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(len(low))
-            tgt[:, 1] += np.maximum(0.0, floor - low)
-            targets[s] = tgt
-        root = _lower_pelvis(motion, gpos, roles, targets, root, cyclic)
-        grot, gpos = motion.global_transforms(rot, root)
+            tgt, w, planted = contact_targets(rsole, rankle, contacts[s], belt, motion.fps, cyclic=cyclic, follow=ankle)
+            tgt = ankle + w[:, None] * (tgt - ankle)
+            # Out of contact the foot follows the motion (blended into and out of its footprints).
+            free[s] = w == 0
+            tgt[free[s]] = ankle[free[s]]
+            lows[s] = sole[:, :, 1].min(axis=1) - ankle[:, 1]
+            foot = grot[:, roles[f"{s}_ankle"]]
+            targets[s], feet[s] = rise_heel(gpos[:, roles[f"{s}_hip"]], tgt, sole - ankle[:, None], foot,
+                                            leg_reach(gpos, roles, s), planted)
+        lowered = _lower_pelvis(motion, gpos, roles, targets, root, cyclic)
         for s in SIDES:
-            rot = two_bone_ik(motion, rot, root, s, targets[s], grot[:, roles[f"{s}_ankle"]])
+            # A swinging foot comes down with a lowered pelvis, its leg keeping its angles (held in
+            # place, it bent the knee of a leg about to land: 23° instead of 6° before heel strike).
+            targets[s][free[s]] += (lowered - root)[free[s]]
+            # Never below the ground, in or out of contact; clear it in swing.
+            floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(motion.n_frames)
+            targets[s][:, 1] += np.maximum(0.0, floor - (lows[s] + targets[s][:, 1]))
+        root = lowered
+        for s in SIDES:
+            rot = two_bone_ik(motion, rot, root, s, targets[s], feet[s])
     out = motion.replace(rotations=rot, root_translation=root)
     out.metadata["foot_cleanup"] = True
     return out
 
 
-def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.7) -> np.ndarray:
+def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.5) -> np.ndarray:
     """0…1 per frame: how flat a foot should be — ramps up over the first ``rise`` of each contact
     (heel strike → foot flat), holds, and ramps down after ``fall`` (heel rise before push-off)."""
     out = np.zeros(len(contact))
@@ -280,8 +313,7 @@ def _lower_pelvis(motion, gpos, roles, targets, root, cyclic):
     drop = np.zeros(motion.n_frames)
     for s in SIDES:
         hip = gpos[:, roles[f"{s}_hip"]]
-        reach = (np.linalg.norm(gpos[0, roles[f"{s}_knee"]] - gpos[0, roles[f"{s}_hip"]]) +
-                 np.linalg.norm(gpos[0, roles[f"{s}_ankle"]] - gpos[0, roles[f"{s}_knee"]])) * 0.995
+        reach = leg_reach(gpos, roles, s)
         d = targets[s] - hip
         horiz = np.linalg.norm(d[:, [0, 2]], axis=1)
         need_y = np.sqrt(np.maximum(reach**2 - horiz**2, 0.0))
@@ -296,3 +328,51 @@ def _lower_pelvis(motion, gpos, roles, targets, root, cyclic):
     out = root.copy()
     out[:, 1] -= smooth
     return out
+
+
+def leg_reach(gpos: np.ndarray, roles: dict, side: str) -> float:
+    """Hip-to-ankle distance the IK may use: thigh plus shank, just short of a locked knee."""
+    hip, knee, ankle = (gpos[0, roles[f"{side}_{j}"]] for j in ("hip", "knee", "ankle"))
+    return float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)) * REACH_FRACTION
+
+
+def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.ndarray, reach: float,
+              planted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ankle targets (T×3) and foot world rotations (T×4) with the heel raised where out of reach.
+
+    A trailing leg reaches its footprint at push-off by lifting the heel — the foot turns about
+    the ball or toe it stands on — not by crouching. Where a frame's ankle target lies further
+    from the hip than ``reach`` and its ``planted`` sole point (index into ``offsets``, the sole
+    points relative to the ankle, T×P×3, in the foot's rotation ``foot``; −1 = none) is ahead of
+    the ankle, the foot turns heel-up about that point, which stays put, by the smallest angle
+    that brings the ankle within reach (at most :data:`MAX_HEEL_RISE_DEG`; :func:`_lower_pelvis`
+    covers any rest). Elsewhere nothing changes.
+
+    >>> up = np.array([[0.0, 0.9, 0.0]])
+    >>> toe = np.array([[[0.0, -0.07, 0.15]]])      # the ball, 15 cm ahead of and 7 cm below the ankle
+    >>> t, f = rise_heel(up, np.array([[0.0, 0.07, -0.5]]), toe, np.array([[1.0, 0, 0, 0]]), 0.95, np.array([0]))
+    >>> round(float(np.linalg.norm(t[0] - up[0])), 3), bool(t[0, 1] > 0.07)
+    (0.95, True)
+    """
+    target, foot = target.copy(), foot.copy()
+    pivot = target + offsets[np.arange(len(target)), np.maximum(planted, 0)]
+    forward = quat.rotate(foot, np.array([0.0, 0.0, 1.0]))
+    ahead = np.einsum("ij,ij->i", (pivot - target)[:, [0, 2]], forward[:, [0, 2]]) > 0
+    todo = np.flatnonzero((planted >= 0) & ahead & (np.linalg.norm(target - hip, axis=1) > reach))
+    if not len(todo):
+        return target, foot
+    arm = target[todo] - pivot[todo]
+    axis = np.cross(arm, np.array([0.0, 1.0, 0.0]))
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+
+    def turned(angle):
+        return pivot[todo] + quat.rotate(quat.from_axis_angle(axis * angle[:, None]), arm)
+
+    lo, hi = np.zeros(len(todo)), np.full(len(todo), np.radians(MAX_HEEL_RISE_DEG))
+    for _ in range(30):  # bisection: the distance to the hip shrinks as the heel rises
+        mid = (lo + hi) / 2
+        far = np.linalg.norm(turned(mid) - hip[todo], axis=1) > reach
+        lo, hi = np.where(far, mid, lo), np.where(far, hi, mid)
+    target[todo] = turned(hi)
+    foot[todo] = quat.mul(quat.from_axis_angle(axis * hi[:, None]), foot[todo])
+    return target, foot

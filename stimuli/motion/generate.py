@@ -6,9 +6,9 @@ the requested stance fraction; a jog warps them to a short stance with a flight 
 knee flexion (stance ≈ 35–40°, swing ≈ 90°), flexes the elbows and leans the trunk, following the
 running literature (Novacheck 1998, *Gait & Posture* 7:77). Every curve is then shaped by the
 :class:`GaitParams` (arm swing/bob/abduction scale about the curve's mean as in the thesis
-modifier). The hip flexion amplitude is fitted so that the stance foot travels exactly one step
-length backwards (speed / step rate), the pelvis height keeps the stance foot on the ground
-(ballistic in flight), and the foot clean-up pins planted feet to the treadmill belt.
+modifier). The hip flexion amplitude is fitted so that the stance ankle travels as far back as
+the foot clean-up's planted foot (:func:`_planted_travel`), the pelvis height keeps the stance foot
+on the ground (ballistic in flight), and the foot clean-up pins planted feet to the treadmill belt.
 
 Examples
 --------
@@ -28,7 +28,7 @@ from stimuli.errors import StimuliError
 from stimuli.motion import quat
 from stimuli.motion.anthropometry import skeleton_points
 from stimuli.motion.balance import balance
-from stimuli.motion.footfix import clean_feet, sole_points, sole_positions
+from stimuli.motion.footfix import clean_feet, contact_targets, flatten_feet, sole_points, sole_positions
 from stimuli.motion.motion import Motion
 from stimuli.motion.normative import TOE_OFF, curve
 
@@ -212,11 +212,18 @@ def _stabilise_head(names, parents, offsets, rot, root, amount: float) -> np.nda
     return out
 
 
-def _stance_travel(m: Motion, stance: np.ndarray) -> float:
-    """Mean backward travel (m) of the left ankle relative to the pelvis during stance."""
-    z = m.positions()[:, m.index("l_ankle"), 2]
+def _span(stance: np.ndarray) -> tuple[int, int]:
+    """First and last frame of the first stance run."""
     first = int(np.argmax(stance))
     last = first + int(np.argmin(stance[first:])) - 1 if not stance[first:].all() else len(stance) - 1
+    return first, last
+
+
+def _stance_travel(m: Motion, stance: np.ndarray, z: np.ndarray | None = None) -> float:
+    """Mean backward travel (m) of the left ankle (or of the positions ``z``) relative to the pelvis
+    during stance, extrapolated from the frames to the whole stance."""
+    z = m.positions()[:, m.index("l_ankle"), 2] if z is None else z
+    first, last = _span(stance)
     return float(z[first] - z[last]) * (last - first + 1) / max(last - first, 1)
 
 
@@ -227,11 +234,18 @@ def _walking_base(m: Motion, stance: dict) -> float:
     return float(xs[0] - xs[1])
 
 
-def _rollover(m: Motion) -> float:
-    """Forward distance from the heel contact point to the ball: how far the ankle advances over
-    the ground while the foot rolls from heel strike to push-off."""
-    pts = sole_points(m, floor_y=-skeleton_floor(m))["l"]
-    return float(pts[1][1][2] - pts[0][1][2]) if len(pts) > 1 else 0.0
+def _planted_travel(m: Motion, stance: dict, belt_speed: float) -> float:
+    """Backward travel (m) of the left ankle over its stance once the foot clean-up plants the foot
+    on the belt (flat at mid-stance, pivoting on heel, then ball): the travel the raw leg swing has
+    to match, or the clean-up stretches the legs and lowers the pelvis to reach the footprints.
+    The ankle itself advances over the ground only while the foot rotates about its heel or ball,
+    a few cm — not the whole heel-to-ball distance."""
+    rot = flatten_feet(m, m.rotations, m.root_translation, stance)
+    grot, gpos = m.global_transforms(rot, m.root_translation)
+    sole = sole_positions(grot, gpos, sole_points(m, floor_y=-skeleton_floor(m))["l"])
+    target, _, _ = contact_targets(sole, gpos[:, m.index("l_ankle")], stance["l"], np.array([0.0, 0.0, -belt_speed]),
+                                   m.fps)
+    return _stance_travel(m, stance["l"], target[:, 2])
 
 
 def _root_height(m: Motion, stance: dict, fps: float) -> np.ndarray:
@@ -307,13 +321,11 @@ def generate(params: GaitParams, height_m: float = 1.75, fps: float = 30.0, cycl
     stance = {"l": phi < p.stance_fraction, "r": ((phi + 0.5) % 1.0) < p.stance_fraction}
     zero = np.zeros((n, 3))
     # Fit the hip flexion amplitude so the stance foot travels one step length of belt per stance.
-    want = p.speed_mps * p.stance_fraction * cycle_s
     hip_scale = 1.0
-    base_gain = 1.0
-    want -= _rollover(Motion(fps, names, parents, offsets, np.tile(quat.IDENTITY, (1, len(names), 1)), zero[:1]))
-    for _ in range(4):
+    for _ in range(6):
         m = Motion(fps, names, parents, offsets, _pose(p, names, phi, hip_scale, adduction), zero)
         got = _stance_travel(m, stance["l"])
+        want = _planted_travel(m, stance, p.speed_mps)
         hip_scale = float(np.clip(hip_scale * want / max(got, 1e-3), 0.3, 2.5))
         # Walking base: the lateral distance between the ankles at mid-stance.
         base = _walking_base(m, stance)
