@@ -50,10 +50,13 @@ TARGET_RMS_DEG = 2.5
 ZETA_MIN = 0.5
 # The root force is a soft guide, not a puppet string: a critically damped spring of this
 # frequency on the base character's mass. It keeps the root on its path and stops a fall, but it
-# cannot carry the body (it would sag g/ω² ≈ 25 cm), so the legs and the ground do, and the
+# cannot carry the body (it would sag g/ω² ≈ 11 cm), so the legs and the ground do, and the
 # segment masses matter. (Tuned freely, the root gains ran to their bound: a stiff root string
-# tracks best and makes every body move alike.)
-ROOT_FREQ_HZ = 1.0
+# tracks best and makes every body move alike.) At 1 Hz the heaviest women's un-crouched walks
+# (the generator after its foot clean-up fix) fell into a hopping cycle — the pelvis sags ~2 cm
+# in single support, the swinging heel lands early on a knee still extending and is thrown up —
+# 20 % of their steps airborne; from 1.5 Hz none is above 3 %.
+ROOT_FREQ_HZ = 1.5
 # The root torque's spring is stiffer (2 Hz): at 1 Hz (k_pr ≈ 0.7 kN·m/rad) it was below the
 # toppling stiffness m·g·h of the heavy bodies, which then relied on stiff ankles to stay upright
 # and fell in the jog's flight phases once the ankles were made compliant (STANCE_WEIGHTS).
@@ -94,7 +97,7 @@ def root_gains(mass_kg: float, freq_hz: float = ROOT_FREQ_HZ, turn_freq_hz: floa
     ``freq_hz`` on ``mass_kg`` (force) and of ``turn_freq_hz`` on ``mass_kg · lever_m²`` (torque).
 
     >>> [round(g) for g in root_gains(70.0)]
-    [2763, 880, 2763, 440]
+    [6218, 1319, 2763, 440]
     """
     omega, turn = 2 * np.pi * freq_hz, 2 * np.pi * turn_freq_hz
     inertia = mass_kg * lever_m**2
