@@ -30,13 +30,13 @@ def main() -> None:
     proto = load_protocol(ROOT / "protocols" / "exp1_shape_motion.yaml")
     actors = [a for a in proto.actors if not getattr(a, "practice_only", False)][:8]
     expected = {"t": 0.960870, "wthr": 0.945304, "chest_m": 1.133739, "speed_ratio": 1.077012,
-                "abduction_offset_deg": 6.14649, "base_cm": 85.9973, "bob_ratio": 1.108682,
+                "abduction_offset_deg": 6.14649, "base_mm": 85.9973, "bob_ratio": 1.108682,
                 "swing_ratio": 1.286497, "height_scale": 1.040956}
     got = thesis_parameters(1.83, 34.1)
     errors = {k: abs(got[k] - v) for k, v in expected.items()}
     print("thesis worked example |error|: max over the 8 values printed to 5–6 decimals "
-          f"{max(e for k, e in errors.items() if k != 'base_cm'):.1e}; walking base (printed to 4) "
-          f"{errors['base_cm']:.1e}")
+          f"{max(e for k, e in errors.items() if k != 'base_mm'):.1e}; walking base (printed to 4) "
+          f"{errors['base_mm']:.1e}")
     cmu = {}
     for name in ("cmu_35_01_walk", "cmu_35_17_run"):
         t0 = time.perf_counter()
