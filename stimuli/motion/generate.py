@@ -212,18 +212,12 @@ def _stabilise_head(names, parents, offsets, rot, root, amount: float) -> np.nda
     return out
 
 
-def _span(stance: np.ndarray) -> tuple[int, int]:
-    """First and last frame of the first stance run."""
-    first = int(np.argmax(stance))
-    last = first + int(np.argmin(stance[first:])) - 1 if not stance[first:].all() else len(stance) - 1
-    return first, last
-
-
 def _stance_travel(m: Motion, stance: np.ndarray, z: np.ndarray | None = None) -> float:
     """Mean backward travel (m) of the left ankle (or of the positions ``z``) relative to the pelvis
     during stance, extrapolated from the frames to the whole stance."""
     z = m.positions()[:, m.index("l_ankle"), 2] if z is None else z
-    first, last = _span(stance)
+    first = int(np.argmax(stance))
+    last = first + int(np.argmin(stance[first:])) - 1 if not stance[first:].all() else len(stance) - 1
     return float(z[first] - z[last]) * (last - first + 1) / max(last - first, 1)
 
 
@@ -320,7 +314,7 @@ def generate(params: GaitParams, height_m: float = 1.75, fps: float = 30.0, cycl
     adduction = np.degrees(np.arcsin(np.clip((hip_w - p.walking_base_m) / 2 / leg, -0.5, 0.5)))
     stance = {"l": phi < p.stance_fraction, "r": ((phi + 0.5) % 1.0) < p.stance_fraction}
     zero = np.zeros((n, 3))
-    # Fit the hip flexion amplitude so the stance foot travels one step length of belt per stance.
+    # Fit the hip flexion amplitude so the stance ankle travels back as far as its planted foot.
     hip_scale = 1.0
     for _ in range(6):
         m = Motion(fps, names, parents, offsets, _pose(p, names, phi, hip_scale, adduction), zero)
