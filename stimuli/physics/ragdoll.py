@@ -42,9 +42,10 @@ FOOT_FRICTION = 1.0
 # not mixed with the default. Damped 1.5× critical instead of 1×: critically damped, the stiff PD
 # legs bounced off the floor at landing. Time constant 0.03 s instead of MuJoCo's 0.02: a heel pad
 # and shoe give about a centimetre; on the rigid 0.02 a jog at 1.5× its reference weight landed
-# with 14 N·m/kg knee-moment spikes and 37 % of its steps airborne (now 0.6 and 30 %), and the
-# generator's un-crouched walks hopped on the heaviest bodies. Penetration: mean 5.5–7 mm walking,
-# 95th percentile 8–11 mm; jog landings of the heaviest man 17 mm (0.02: 3.6–4.5, 5–7, 11 mm).
+# with 14 N·m/kg knee-moment spikes and 37 % of its steps airborne (now 0.6 and 30 %); the
+# bundled CMU walk hops less (15 % airborne on the base body, 18 % before). Penetration: mean
+# 5.5–7 mm walking, 95th percentile 8–11 mm; jog landings of the heaviest man 17 mm (0.02:
+# 3.6–4.5, 5–7 and 11 mm).
 CONTACT_SOLREF = "0.03 1.5"
 ARMATURE = 0.01  # kg·m² added to every hinge: keeps light segments stable at a 1 ms step
 
