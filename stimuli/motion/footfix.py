@@ -182,8 +182,9 @@ def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
     The foot leaves the ground steeply (a square-rooted half sine: no toe grazing the belt after
     push-off) and comes down more gently (the half sine to the power :data:`LANDING_POWER`): the
     leg is almost straight then, and every cm of lift late in swing costs degrees of knee flexion
-    (last three frames before heel strike: 39/29/22° square-rooted, 37/26/17° here; CGM2.3
-    18/8/5°); a plain or squared sine let the heel graze the belt (5–8 % of frames skating).
+    (last three frames before heel strike: 39/29/22° square-rooted, 37/26/17° here, 18/8/5° in
+    the uncleaned normative angles); a plain or squared sine let the heel graze the belt (5–8 % of
+    frames skating).
     """
     out = np.zeros(len(contact))
     if height <= 0 or contact.all() or not contact.any():
