@@ -27,7 +27,6 @@ as stored; moments converted from N·mm/kg to N·m/kg).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
