@@ -136,8 +136,13 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
     if cyclic and contact.all():
         contact = contact.copy()
         contact[np.argmax(sole[:, :, 1].min(axis=1))] = False
-    if cyclic and contact[0]:
-        shift = int(np.argmin(contact))  # first frame out of contact becomes frame 0
+    if cyclic and contact.any() and not contact.all():
+        # The middle of the longest swing becomes frame 0: the blends before and after every
+        # contact then lie inside the array (a contact ending on the clip's last frame used to
+        # lose its blend-out, and the clip jumped at its seam).
+        gaps = _intervals(~np.concatenate([contact, contact]))
+        s, e = max(gaps, key=lambda g: min(g[1] - g[0], t_n))
+        shift = (s + e) // 2 % t_n
     roll = lambda x: np.roll(x, -shift, axis=0)  # noqa: E731
     sole_r, ankle_r, c_r = roll(sole), roll(ankle), roll(contact)
     follow_r = ankle_r if follow is None else roll(follow)
