@@ -60,6 +60,22 @@ def test_walk_has_double_support_and_jog_has_flight(motions):
         assert j["knee_flexion_max_deg"] > w["knee_flexion_max_deg"] + 10
 
 
+def test_generated_jog_knee_runs(motions):
+    """The jog's legs follow the bundled CMU run: landing on a bent knee, 40–50° at mid-stance,
+    the swing peak late (≈ 73 % of the cycle). Built on warped walking curves it kept walking's
+    knee: 21° at most in stance, the swing peak at 54–58 %, a 37° jump in one frame after toe off
+    and a straight knee reaching for the belt that the clean-up bent back just before landing."""
+    for a in ACTORS:
+        m = motions[(a[0], "jog")]
+        n = m.n_frames // m.metadata["cycles"]
+        knee = knee_angles(m)["l"][:n]
+        phi = np.arange(n) / n
+        stance = phi < m.metadata["stance_fraction"]
+        assert 20 < knee[0] < 35 and 38 < knee[stance].max() < 55, (a[0], knee.round())
+        assert 85 < knee.max() < 105 and 0.6 < phi[np.argmax(knee)] < 0.8, (a[0], knee.round())
+        assert knee[-3:].min() > 15 and np.abs(np.diff(knee)).max() < 25, (a[0], knee.round())
+
+
 def test_generated_walk_is_stable_most_of_the_time(motions):
     unstable = [plausibility_from_joints(motions[(a[0], "walk")])["dynamically_unstable_pct"] for a in ACTORS]
     # HUMOS reports 28.1 % unstable frames for its own motions.

@@ -2,9 +2,11 @@
 
 The basis is real data: the normative adult walking kinematics of CGM2.3 (pelvis, hip, knee,
 ankle, spine, shoulder, elbow angles over the cycle). A walk plays these curves time-warped to
-the requested stance fraction; a jog warps them to a short stance with a flight phase, deepens
-knee flexion (stance ≈ 35–40°, swing ≈ 90°), flexes the elbows and leans the trunk, following the
-running literature (Novacheck 1998, *Gait & Posture* 7:77). Every curve is then shaped by the
+the requested stance fraction. A jog's legs (thigh, knee, ankle in the sagittal plane) follow the
+bundled CMU run capture (:mod:`stimuli.motion.running`: landing on a bent knee, 45–50° at
+mid-stance, about 90° late in swing) warped to the requested stance with a flight phase; its
+pelvis, trunk and arms keep the warped walking curves, with flexed elbows and a leaning trunk as
+in the running literature (Novacheck 1998, *Gait & Posture* 7:77). Every curve is then shaped by the
 :class:`GaitParams` (arm swing/bob/abduction scale about the curve's mean as in the thesis
 modifier). The hip flexion amplitude is fitted so that the stance ankle travels as far back as
 the foot clean-up's planted foot (:func:`_planted_travel`), the pelvis height keeps the stance foot
@@ -31,6 +33,7 @@ from stimuli.motion.balance import balance
 from stimuli.motion.footfix import clean_feet, contact_targets, flatten_feet, sole_points, sole_positions
 from stimuli.motion.motion import Motion
 from stimuli.motion.normative import TOE_OFF, curve
+from stimuli.motion.running import run_curve, run_toe_off
 
 GRAVITY = 9.81
 # Peak height of the lowest point of a swinging foot (walking: toe clearance ~1.5 cm at its
@@ -47,12 +50,13 @@ for _s in ("l", "r"):
     TREE += [(f"{_s}_clavicle", "chest"), (f"{_s}_shoulder", f"{_s}_clavicle"), (f"{_s}_elbow", f"{_s}_shoulder"),
              (f"{_s}_wrist", f"{_s}_elbow"), (f"{_s}_hand_end", f"{_s}_wrist")]
 
-# Gait-specific defaults (walk: CGM2.3 normative; jog: Novacheck 1998 typical jogging values).
+# Gait-specific defaults (walk: CGM2.3 normative; jog: Novacheck 1998 typical jogging values; the
+# jog's leg curves are already running ones, so its knee gains and hip offset are neutral).
 GAIT_DEFAULTS = {
     "walk": dict(stance_fraction=0.61, trunk_lean_deg=2.0, elbow_flexion_deg=0.0, arm_swing_ratio=1.0,
                  knee_stance_gain=1.0, knee_swing_gain=1.0, hip_flexion_offset_deg=0.0),
     "jog": dict(stance_fraction=0.40, trunk_lean_deg=7.0, elbow_flexion_deg=55.0, arm_swing_ratio=1.3,
-                knee_stance_gain=2.0, knee_swing_gain=1.5, hip_flexion_offset_deg=6.0),
+                knee_stance_gain=1.0, knee_swing_gain=1.0, hip_flexion_offset_deg=0.0),
 }
 
 
@@ -118,11 +122,24 @@ def canonical_skeleton(height_m: float) -> tuple[list[str], np.ndarray, np.ndarr
     return names, parents, offsets
 
 
-def _warp(phi: np.ndarray, stance: float) -> np.ndarray:
-    """Output cycle fraction → normative cycle fraction, mapping stance onto the normative stance."""
+def _warp(phi: np.ndarray, stance: float, toe_off: float = TOE_OFF) -> np.ndarray:
+    """Output cycle fraction → basis cycle fraction, mapping stance onto the basis's stance
+    (``toe_off``: the basis's toe-off fraction, CGM2.3 walking by default)."""
     phi = np.mod(phi, 1.0)
-    return np.where(phi < stance, phi / stance * TOE_OFF,
-                    TOE_OFF + (phi - stance) / (1.0 - stance) * (1.0 - TOE_OFF))
+    return np.where(phi < stance, phi / stance * toe_off,
+                    toe_off + (phi - stance) / (1.0 - stance) * (1.0 - toe_off))
+
+
+def _leg_basis(gait: str) -> tuple[dict, float]:
+    """Sagittal leg curves (thigh-to-vertical ``hip``, ``knee``, ``ankle``) and their toe off."""
+    if gait == "jog":
+        return {k: run_curve(k) for k in ("hip", "knee", "ankle")}, run_toe_off()
+    # Hip flexion is measured from a pelvis tilted forward ~7° (Plug-in-Gait); our pelvis is level,
+    # so the thigh's angle to the vertical is hip flexion minus the mean pelvic tilt.
+    tilt = float(np.mean(curve("PelvisAngles", "X")(np.linspace(0, 1, 100, endpoint=False))))
+    hip = curve("HipAngles", "X")
+    return {"hip": lambda psi: hip(psi) - tilt, "knee": curve("KneeAngles", "X"),
+            "ankle": curve("AnkleAngles", "X")}, TOE_OFF
 
 
 def _about_mean(f, psi: np.ndarray, ratio: float) -> np.ndarray:
@@ -144,20 +161,20 @@ def _rz(a):
     return quat.from_axis_angle(np.stack([0 * a, 0 * a, a], -1))
 
 
-def _leg_angles(p: GaitParams, psi: np.ndarray, hip_scale: float, sign: float, adduction: float):
-    """Hip, knee, ankle local quaternions for one leg at normative phases ``psi``."""
+def _leg_angles(p: GaitParams, phi: np.ndarray, hip_scale: float, sign: float, adduction: float):
+    """Hip, knee, ankle local quaternions for one leg at its own cycle fractions ``phi``."""
     d = np.radians
-    # Hip flexion is measured from a pelvis tilted forward ~7° (Plug-in-Gait); our pelvis is level,
-    # so the thigh's angle to the vertical is hip flexion minus the mean pelvic tilt.
-    tilt = float(np.mean(curve("PelvisAngles", "X")(np.linspace(0, 1, 100, endpoint=False))))
-    hip_flex = _about_mean(curve("HipAngles", "X"), psi, hip_scale) - tilt + p.hip_flexion_offset_deg
-    hip_add = _about_mean(curve("HipAngles", "Y"), psi, 1.0) - np.mean(curve("HipAngles", "Y")(np.linspace(0, 1, 100)))
-    # Knee: deeper stance flexion for a jog (a smooth bump over stance), deeper swing flexion.
-    bump = np.where(psi < TOE_OFF, np.sin(np.pi * psi / TOE_OFF) ** 2, 0.0)
+    basis, toe_off = _leg_basis(p.gait)
+    psi = _warp(phi, p.stance_fraction, toe_off)
+    hip_flex = _about_mean(basis["hip"], psi, hip_scale) + p.hip_flexion_offset_deg
+    walk_psi = _warp(phi, p.stance_fraction)
+    hip_add = _about_mean(curve("HipAngles", "Y"), walk_psi, 1.0) - np.mean(curve("HipAngles", "Y")(np.linspace(0, 1, 100)))
+    # Knee gains: stance (a smooth bump over stance) and swing flexion relative to the basis.
+    bump = np.where(psi < toe_off, np.sin(np.pi * psi / toe_off) ** 2, 0.0)
     gain = p.knee_swing_gain + (p.knee_stance_gain - p.knee_swing_gain) * bump
-    gain = np.where(psi < TOE_OFF, gain, p.knee_swing_gain)
-    knee = np.maximum(curve("KneeAngles", "X")(psi), 0.0) * gain * p.knee_flexion_scale
-    ankle = curve("AnkleAngles", "X")(psi)
+    gain = np.where(psi < toe_off, gain, p.knee_swing_gain)
+    knee = np.maximum(basis["knee"](psi), 0.0) * gain * p.knee_flexion_scale
+    ankle = basis["ankle"](psi)
     hip = quat.mul(_rx(-d(hip_flex)), quat.mul(_rz(-sign * d(hip_add + adduction)), _ry(sign * d(p.toe_out_deg))))
     return hip, _rx(d(knee)), _rx(-d(ankle))
 
@@ -169,7 +186,7 @@ def _pose(p: GaitParams, names: list[str], phi: np.ndarray, hip_scale: float, ad
     rot = np.tile(quat.IDENTITY, (t, len(names), 1))
     psi = {"l": _warp(phi, p.stance_fraction), "r": _warp(phi + 0.5, p.stance_fraction)}
     for s, sign in (("l", 1.0), ("r", -1.0)):
-        hip, knee, ankle = _leg_angles(p, psi[s], hip_scale, sign, adduction)
+        hip, knee, ankle = _leg_angles(p, np.mod(phi + (0.0 if s == "l" else 0.5), 1.0), hip_scale, sign, adduction)
         rot[:, names.index(f"{s}_hip")] = hip
         rot[:, names.index(f"{s}_knee")] = knee
         rot[:, names.index(f"{s}_ankle")] = ankle
