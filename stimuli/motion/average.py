@@ -7,7 +7,10 @@ time reference; every cycle is aligned to it along its DTW warping path, and per
 the matched local rotations are averaged with the sign-invariant quaternion mean (never Euler
 angles), the root heights and offsets arithmetically. The averaged cycle is looped (it is
 periodic by construction up to the seam correction) and repeated to the requested cycles. This is
-the NoCOM condition of Exp 2.
+the NoCOM condition of Exp 2. When every input carries its foot contacts (metadata ``contacts``,
+as generated gaits do), the average carries the majority of the matched frames' contacts, so the
+display plants its feet when its actors' feet were down rather than guessing from foot heights
+(which planted one of the averaged jogs' two flight frames per step).
 """
 
 from __future__ import annotations
@@ -73,7 +76,9 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
     n = cyc[ref].n_frames
     rots = [[] for _ in range(n)]
     roots = [[] for _ in range(n)]
-    for c, f in zip(cyc, feats):
+    contacts = [_cycle_contacts(m, c.n_frames) if m.fps == fps else None for m, c in zip(motions, cyc)]
+    votes = np.zeros((n, 2))
+    for c, f, contact in zip(cyc, feats, contacts):
         per_frame: dict[int, list[int]] = {}
         for i, j in _path(feats[ref], f):
             per_frame.setdefault(i, []).append(j)
@@ -81,6 +86,8 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
             js = per_frame.get(i, [i])
             rots[i].append(quat.mean(c.rotations[js]))
             roots[i].append(c.root_translation[js].mean(axis=0))
+            if contact is not None:
+                votes[i] += contact[js].mean(axis=0)
     rot = np.stack([quat.mean(np.stack(r)) for r in rots])
     root = np.stack([np.mean(r, axis=0) for r in roots])
     offsets = np.mean([c.offsets for c in cyc], axis=0)
@@ -96,7 +103,21 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
     looped = avg.slice(0, avg.n_frames - 1) if periodic else close_loop(avg)
     looped.metadata["looped"] = True
     looped.metadata.update(cycles=1, cadence_spm=120.0 * fps / (n - 1))
-    return repeat(looped, cycles)
+    out = repeat(looped, cycles)
+    if periodic and all(c is not None for c in contacts):
+        down = np.tile(votes[: n - 1] / len(motions) >= 0.5, (max(cycles, 1), 1))
+        out.metadata["contacts"] = {s: down[:, k].astype(int).tolist() for k, s in enumerate("lr")}
+    return out
+
+
+def _cycle_contacts(motion: Motion, n: int) -> np.ndarray | None:
+    """The first ``n`` frames' foot contacts (n × 2: left, right) of a looped motion that carries
+    them for all its frames (metadata ``contacts``), else None."""
+    known = motion.metadata.get("contacts") or {}
+    if not motion.metadata.get("looped") or any(len(known.get(s, [])) != motion.n_frames for s in "lr"):
+        return None
+    both = np.stack([np.asarray(known[s], bool) for s in "lr"], axis=1)
+    return both[np.arange(n) % motion.n_frames]
 
 
 def protocol_average(protocol, sex: str, gait: str, fps: float | None = None, cycles: int | None = None) -> Motion:
