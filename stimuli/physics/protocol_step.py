@@ -23,7 +23,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 
-CODE_VERSION = "physics-13"
+CODE_VERSION = "physics-14"
 
 
 def cache_dir() -> Path:
