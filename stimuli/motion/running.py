@@ -64,7 +64,7 @@ def _cycle() -> tuple[dict[str, np.ndarray], float]:
     if len(strikes) < 2:
         raise ValueError(f"{DATA.name}: fewer than two left foot contacts, no whole cycle")
     start, end = int(strikes[0]), int(strikes[1])
-    toe_off = (start + int(np.argmin(contact[start:end]))) - start
+    toe_off = int(np.argmin(contact[start:end]))  # frames from heel strike to the first one off the ground
     joint = {k: pos[start:end, roles[f"l_{k}"]] for k in ("hip", "knee", "ankle", "toe")}
     thigh = _sagittal_angle(joint["knee"] - joint["hip"], forward)
     shank = _sagittal_angle(joint["ankle"] - joint["knee"], forward)
