@@ -137,6 +137,10 @@ def test_generator_rejects_bad_parameters():
         generate(GaitParams(gait="skip"))
     with pytest.raises(StimuliError, match="cadence_spm"):
         generate(GaitParams(cadence_spm=5))
+    # 4 m/s at 110 steps/min with 40 % stance: 1.6 m of belt under each planted foot. The legs used
+    # to try anyway (hip swing at its cap, knees folded to 170–180°); now the message says why.
+    with pytest.raises(StimuliError, match="travels 1.5. m .* lower speed_mps or stance_fraction"):
+        generate(GaitParams(gait="jog", cadence_spm=110, speed_mps=4.0), height_m=1.75)
 
 
 def test_generated_step_length_matches_speed_and_cadence():

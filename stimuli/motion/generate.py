@@ -36,6 +36,10 @@ from stimuli.motion.normative import TOE_OFF, curve
 from stimuli.motion.running import run_curve, run_toe_off
 
 GRAVITY = 9.81
+# The hip flexion amplitude is fitted to the planted foot's travel within this multiple of the
+# basis curve's. At the cap the legs cannot cover the stance and the clean-up folds the knees (up
+# to 150–180°); Exp 1/2's actors need at most 1.15× walking and 1.74× jogging.
+HIP_SCALE_MAX = 2.5
 # Peak height of the lowest point of a swinging foot (walking: toe clearance ~1.5 cm at its
 # minimum, Winter 1992; the half-sine profile peaks mid-swing).
 SWING_CLEARANCE_M = {"walk": 0.04, "jog": 0.08}
@@ -337,10 +341,16 @@ def generate(params: GaitParams, height_m: float = 1.75, fps: float = 30.0, cycl
         m = Motion(fps, names, parents, offsets, _pose(p, names, phi, hip_scale, adduction), zero)
         got = _stance_travel(m, stance["l"])
         want = _planted_travel(m, stance, p.speed_mps)
-        hip_scale = float(np.clip(hip_scale * want / max(got, 1e-3), 0.3, 2.5))
+        hip_scale = float(np.clip(hip_scale * want / max(got, 1e-3), 0.3, HIP_SCALE_MAX))
         # Walking base: the lateral distance between the ankles at mid-stance.
         base = _walking_base(m, stance)
         adduction += np.degrees((base - p.walking_base_m) / 2 / leg)
+    if hip_scale >= HIP_SCALE_MAX and want > 1.02 * got:
+        raise StimuliError(
+            f"gait {p.gait}: at speed_mps {p.speed_mps:g}, cadence_spm {p.cadence_spm:g} and stance_fraction "
+            f"{p.stance_fraction:.2f} a planted foot travels {want:.2f} m under the body during each stance, more "
+            f"than the legs of a {height_m:.2f} m body reach ({got:.2f} m with the hip swinging "
+            f"{HIP_SCALE_MAX:g}× its basis curve's range); lower speed_mps or stance_fraction, or raise cadence_spm")
     rot = _pose(p, names, phi, hip_scale, adduction)
     m = Motion(fps, names, parents, offsets, rot, zero)
     root = zero.copy()
