@@ -5,11 +5,17 @@ the rest pose. While a foot is in contact, its lowest sole point is pinned to th
 a horizontal anchor that moves backwards with the treadmill belt (zero overground); when the
 lowest point changes (heel → ball during roll-over) the new point is anchored where it is, so the
 foot rolls instead of sliding. The ankle target that results is reached with analytic two-bone IK
-on hip and knee (Holden's formulation), keeping the foot's orientation; targets blend in and out
-over a few frames around each contact. Outside contact, a foot that would go below the ground is
-lifted. If a target is out of reach the heel rises about the planted ball or toe
-(:func:`rise_heel`), and only then is the pelvis lowered just enough (smoothly, over the loop); a
-swinging foot comes down with the pelvis.
+on hip and knee (Holden's formulation), keeping the foot's orientation. If a target is out of
+reach the heel rises about the planted ball or toe (:func:`rise_heel`), and only then is the
+pelvis lowered just enough (smoothly, over the loop); a swinging foot comes down with the pelvis.
+
+The knee is left to the source wherever the feet allow it: near full extension 1 cm of
+hip-to-ankle distance is about 18° of knee, so pinning a foot at the source's pitch straightened
+the knee late in stance and snapped it at toe off. Late in stance the foot rolls about its planted
+ball or toe until the hip-to-ankle distance is the source's (:func:`roll_off`); the frames around
+a contact carry its correction as a turn of the hip-to-ankle line (:func:`reblend`); and a
+swinging foot that would pass below its clearance turns its toes up before the whole foot is
+lifted (:func:`lift_toes`).
 """
 
 from __future__ import annotations
@@ -30,6 +36,11 @@ REACH_FRACTION = 0.995
 MAX_HEEL_RISE_DEG = 35.0
 # Shape of the swing clearance's descent (see swing_clearance).
 LANDING_POWER = 0.75
+# Clearance from the first frame of swing on (skating counts points within 1 cm of the ground).
+LIFT_OFF_CLEARANCE_M = 0.015
+# Most a swinging foot's toes turn up to clear the ground (swing dorsiflexion: from about 15°
+# plantar flexion at toe off to neutral).
+MAX_TOE_LIFT_DEG = 15.0
 
 
 def sole_points(motion: Motion, floor_y: float | None = None) -> dict[str, list[tuple[int, np.ndarray]]]:
@@ -132,17 +143,10 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
     the motion being cleaned, when the footprints come from a reference pose.
     """
     t_n = len(contact)
-    shift = 0
     if cyclic and contact.all():
         contact = contact.copy()
         contact[np.argmax(sole[:, :, 1].min(axis=1))] = False
-    if cyclic and contact.any() and not contact.all():
-        # The middle of the longest swing becomes frame 0: the blends before and after every
-        # contact then lie inside the array (a contact ending on the clip's last frame used to
-        # lose its blend-out, and the clip jumped at its seam).
-        gaps = _intervals(~np.concatenate([contact, contact]))
-        s, e = max(gaps, key=lambda g: min(g[1] - g[0], t_n))
-        shift = (s + e) // 2 % t_n
+    shift = _swing_middle(contact) if cyclic else 0
     roll = lambda x: np.roll(x, -shift, axis=0)  # noqa: E731
     sole_r, ankle_r, c_r = roll(sole), roll(ankle), roll(contact)
     follow_r = ankle_r if follow is None else roll(follow)
@@ -170,22 +174,138 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
             weight[t] = 1.0
         # Sideways, keep the foot where the source puts it on average over the contact.
         target[s:e, 0] += ankle_r[s:e, 0].mean() - target[s:e, 0].mean()
-        # Blend the correction in before and out after the contact.
+    # Blend the correction in before and out after each contact.
+    for t, ref, w in _blend_frames(c_r, blend):
+        target[t] = follow_r[t] + (target[ref] - follow_r[ref])
+        weight[t] = w
+    unroll = lambda x: np.roll(x, shift, axis=0)  # noqa: E731
+    return unroll(target), unroll(weight), unroll(pivots)
+
+
+def _swing_middle(contact: np.ndarray) -> int:
+    """The middle frame of the longest run without contact (0 if there is none): rolled to the
+    front, it keeps the blends before and after every contact inside the array (a contact ending
+    on a looped clip's last frame used to lose its blend-out, and the clip jumped at its seam)."""
+    if not contact.any() or contact.all():
+        return 0
+    n = len(contact)
+    gaps = _intervals(~np.concatenate([contact, contact]))
+    s, e = max(gaps, key=lambda g: min(g[1] - g[0], n))
+    return (s + e) // 2 % n
+
+
+def _blend_frames(contact: np.ndarray, blend: int) -> list[tuple[int, int, float]]:
+    """(frame, contact frame it follows, weight) for the ``blend`` frames before and after each
+    contact, cosine weights; where two blends meet the stronger wins (no wrapping)."""
+    n, best = len(contact), {}
+    for s, e in _intervals(contact):
         for d in range(1, blend + 1):
             w = 0.5 * (1 + np.cos(np.pi * d / (blend + 1)))
             for t, ref in ((s - d, s), (e - 1 + d, e - 1)):
-                if 0 <= t < t_n and weight[t] < w:
-                    target[t] = follow_r[t] + (target[ref] - follow_r[ref])
-                    weight[t] = w
-    unroll = lambda x: np.roll(x, shift, axis=0)  # noqa: E731
-    return unroll(target), unroll(weight), unroll(pivots)
+                if 0 <= t < n and not contact[t] and w > best.get(t, (0, 0.0))[1]:
+                    best[t] = (ref, w)
+    return [(t, ref, w) for t, (ref, w) in best.items()]
+
+
+def _blends(weight: np.ndarray, blend: int = 4) -> list[tuple[int, int, float]]:
+    """(frame, contact frame it follows, weight) around the contacts (``weight`` 1) of a looped
+    clip, as :func:`contact_targets` blends them."""
+    contact = weight >= 1.0
+    n, shift = len(weight), _swing_middle(contact)
+    return [((t + shift) % n, (ref + shift) % n, w) for t, ref, w in _blend_frames(np.roll(contact, -shift), blend)]
+
+
+def reblend(target: np.ndarray, weight: np.ndarray, follow: np.ndarray, hip: np.ndarray) -> np.ndarray:
+    """Blended ankle targets of one foot for a looped clip, from its final contact-frame targets
+    (``weight`` 1, as :func:`contact_targets` gives): each frame around a contact carries the
+    correction of the contact's first or last frame onto the ankle path ``follow`` as a turn of
+    the hip-to-ankle line and a change of its length (``hip``: T×3), so the knee changes as the
+    source's does through lift-off and landing (a carried offset bent a near-straight knee by up
+    to 20° in one frame); frames further away follow ``follow``.
+    """
+    out = follow.copy()
+    contact = weight >= 1.0
+    out[contact] = target[contact]
+    for t, ref, w in _blends(weight):
+        out[t] = follow[t] + w * (_carry(target[ref], follow[ref], follow[t], hip[ref], hip[t]) - follow[t])
+    return out
+
+
+def reblend_feet(feet: np.ndarray, weight: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """Foot world rotations of a looped clip with the turn a contact's first or last frame gave
+    the foot (``feet`` against ``source``) faded out over the frames around it, as the ankle
+    targets are (without it the foot pitch jumped by the roll-off's heel rise at toe off)."""
+    out = feet.copy()
+    for t, ref, w in _blends(weight):
+        turn = quat.mul(feet[ref], quat.inv(source[ref]))
+        out[t] = quat.slerp(source[t][None], quat.mul(turn, source[t])[None], np.array([w]))[0]
+    return out
+
+
+def _carry(target_ref: np.ndarray, follow_ref: np.ndarray, follow: np.ndarray, hip_ref: np.ndarray,
+           hip: np.ndarray) -> np.ndarray:
+    """``follow`` moved as ``follow_ref`` was to reach ``target_ref``: the hip-to-ankle line turned
+    by the same angle and lengthened by the same amount."""
+    u, v, w = follow_ref - hip_ref, target_ref - hip_ref, follow - hip
+    nu, nv, nw = (max(float(np.linalg.norm(x)), 1e-9) for x in (u, v, w))
+    axis = np.cross(u, v)
+    angle = np.arctan2(np.linalg.norm(axis), np.dot(u, v))
+    turn = quat.from_axis_angle(axis / max(float(np.linalg.norm(axis)), 1e-12) * angle)
+    return hip + quat.rotate(turn, w) * (nw + nv - nu) / nw
+
+
+def offsets_of(foot: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Sole points relative to the ankle (T×P×3) for foot world rotations ``foot`` (T×4), from
+    their positions in the foot's frame ``local`` (T×P×3)."""
+    return quat.rotate(foot[:, None], local)
+
+
+def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: np.ndarray,
+              swing: np.ndarray) -> np.ndarray:
+    """Foot rotations with a swinging foot's toes turned up (about the ankle, at most
+    :data:`MAX_TOE_LIFT_DEG`) where its lowest sole point would pass below ``floor`` (T).
+
+    In people the ankle dorsiflexes after push-off to clear the ground; lifting the whole foot
+    instead bends a nearly straight knee sharply (1 cm ≈ 18°) in the first frames of swing.
+    Turns the least that reaches the floor, else the one that lifts the lowest point most;
+    :func:`clean_feet` lifts the ankle for any rest.
+
+    >>> toe_down = np.array([[[0.0, -0.02, -0.05], [0.0, -0.12, 0.12]]])  # heel, toe tip: toes pointing down
+    >>> f = lift_toes(np.array([[0.0, 0.12, 0.0]]), np.array([[1.0, 0, 0, 0]]), toe_down, np.array([0.02]),
+    ...               np.array([True]))
+    >>> low = offsets_of(f, toe_down)[0, :, 1].min() + 0.12
+    >>> bool(0.0195 < low < 0.0215)
+    True
+    """
+    out = foot.copy()
+    need = floor - (ankle[:, 1] + offsets[:, :, 1].min(axis=1))
+    todo = np.flatnonzero(swing & (need > 0))
+    if not len(todo):
+        return out
+    # Toes up: a turn about the horizontal axis across the foot, forward (heel → toe tip, the
+    # first and last sole points) × up.
+    fwd = offsets[todo, -1] - offsets[todo, 0]
+    fwd[:, 1] = 0.0
+    fwd /= np.maximum(np.linalg.norm(fwd, axis=1, keepdims=True), 1e-12)
+    axis = np.cross(fwd, np.array([0.0, 1.0, 0.0]))
+    angles = np.radians(np.arange(0.0, MAX_TOE_LIFT_DEG + 0.25, 0.5))
+    lows = np.stack([
+        ankle[todo, 1] + quat.rotate(quat.from_axis_angle(axis * a)[:, None], offsets[todo])[:, :, 1].min(axis=1)
+        for a in angles], axis=1)
+    enough = lows >= floor[todo, None]
+    pick = np.where(enough.any(axis=1), np.argmax(enough, axis=1), np.argmax(lows, axis=1))
+    out[todo] = quat.mul(quat.from_axis_angle(axis * angles[pick][:, None]), foot[todo])
+    return out
 
 
 def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
     """Minimum height of the lowest sole point over each swing, peaking at ``height`` mid-swing.
 
-    The foot leaves the ground steeply (a square-rooted half sine: no toe grazing the belt after
-    push-off) and comes down more gently (the half sine to the power :data:`LANDING_POWER`): the
+    The foot clears :data:`LIFT_OFF_CLEARANCE_M` from the first frame of swing (no toe grazing
+    the belt after push-off), then the half sine; a square-rooted half sine, steeper, asked a jog's
+    toes for 3.7 cm one frame after toe off where the source has 1.5–2.2 cm, and the lift bent the
+    knee 5–15° in that frame. It comes down more gently (the half sine to the power
+    :data:`LANDING_POWER`): the
     leg is almost straight then, and every cm of lift late in swing costs degrees of knee flexion
     (last three frames before heel strike: 39/29/22° square-rooted, 37/26/17° here, 18/8/5° in
     the uncleaned normative angles); a plain or squared sine let the heel graze the belt (5–8 % of
@@ -199,7 +319,8 @@ def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
     for s, e in _intervals(~c):
         u = (np.arange(s, e) - s + 1) / (e - s + 1)
         rise = np.sin(np.pi * u)
-        out[s:e] = height * np.where(u < 0.5, np.sqrt(rise), rise**LANDING_POWER)
+        out[s:e] = np.where(u < 0.5, np.maximum(min(LIFT_OFF_CLEARANCE_M, height), height * rise),
+                            height * rise**LANDING_POWER)
     return np.roll(out, shift)
 
 
@@ -219,10 +340,13 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     roles = role_indices(motion)
     rot, root = motion.rotations.copy(), motion.root_translation.copy()
     rot = flatten_feet(motion, rot, root, contacts, cyclic)
+    _, src = motion.global_transforms()
+    src_len = {s: np.linalg.norm(src[:, roles[f"{s}_ankle"]] - src[:, roles[f"{s}_hip"]], axis=1) for s in SIDES}
+    rolls = {}
     for it in range(iterations):
         grot, gpos = motion.global_transforms(rot, root)
         rgrot, rgpos = (grot, gpos) if reference is None or it > 0 else reference.global_transforms()
-        targets, feet, free, lows = {}, {}, {}, {}
+        targets, feet, free, foot_offsets, weights = {}, {}, {}, {}, {}
         for s in SIDES:
             ankle = gpos[:, roles[f"{s}_ankle"]]
             sole = sole_positions(grot, gpos, points[s])
@@ -231,20 +355,37 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
             tgt, w, planted = contact_targets(rsole, rankle, contacts[s], belt, motion.fps, cyclic=cyclic, follow=ankle)
             tgt = ankle + w[:, None] * (tgt - ankle)
             # Out of contact the foot follows the motion (blended into and out of its footprints).
-            free[s] = w == 0
+            free[s], weights[s] = w == 0, w
             tgt[free[s]] = ankle[free[s]]
-            lows[s] = sole[:, :, 1].min(axis=1) - ankle[:, 1]
             foot = grot[:, roles[f"{s}_ankle"]]
-            targets[s], feet[s] = rise_heel(gpos[:, roles[f"{s}_hip"]], tgt, sole - ankle[:, None], foot,
-                                            leg_reach(gpos, roles, s), planted)
+            # The sole points in the foot's own frame, to place them for any foot rotation.
+            foot_offsets[s] = quat.rotate(quat.inv(foot)[:, None], sole - ankle[:, None])
+            reach = leg_reach(gpos, roles, s)
+            targets[s], feet[s] = rise_heel(gpos[:, roles[f"{s}_hip"]], tgt, sole - ankle[:, None], foot, reach, planted)
+            rolls[s] = (tgt, sole - ankle[:, None], foot, planted, reach)
         lowered = _lower_pelvis(motion, gpos, roles, targets, root, cyclic)
         for s in SIDES:
+            # Late in stance the foot rolls about its planted ball or toe so that the knee keeps
+            # the source's bend (near a straight knee 1 cm of hip-to-ankle distance is ~18° of knee).
+            tgt, offsets, foot, planted, reach = rolls[s]
+            hip = gpos[:, roles[f"{s}_hip"]] + (lowered - root)
+            late = roll_weight(contacts[s])
+            rolled, turned = roll_off(hip, tgt, offsets, foot, planted, src_len[s], late, reach)
+            done = late > 0
+            targets[s][done], feet[s][done] = rolled[done], turned[done]
             # A swinging foot comes down with a lowered pelvis, its leg keeping its angles (held in
             # place, it bent the knee of a leg about to land: 23° instead of 6° before heel strike).
-            targets[s][free[s]] += (lowered - root)[free[s]]
+            follow = gpos[:, roles[f"{s}_ankle"]] + (lowered - root)
+            if cyclic:
+                targets[s] = reblend(targets[s], weights[s], follow, hip)
+                feet[s] = reblend_feet(feet[s], weights[s], grot[:, roles[f"{s}_ankle"]])
+            else:
+                targets[s][free[s]] = follow[free[s]]
             # Never below the ground, in or out of contact; clear it in swing.
             floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(motion.n_frames)
-            targets[s][:, 1] += np.maximum(0.0, floor - (lows[s] + targets[s][:, 1]))
+            feet[s] = lift_toes(targets[s], feet[s], offsets_of(feet[s], foot_offsets[s]), floor, ~contacts[s])
+            low = offsets_of(feet[s], foot_offsets[s])[:, :, 1].min(axis=1)
+            targets[s][:, 1] += np.maximum(0.0, floor - (low + targets[s][:, 1]))
         root = lowered
         for s in SIDES:
             rot = two_bone_ik(motion, rot, root, s, targets[s], feet[s])
@@ -276,6 +417,20 @@ def _contact_mean_yaw(yaw: np.ndarray, contact: np.ndarray) -> np.ndarray:
     for s, e in _intervals(c):
         y[s:e] = np.arctan2(np.sin(y[s:e]).mean(), np.cos(y[s:e]).mean())
     return np.roll(y, shift)
+
+
+def roll_weight(contact: np.ndarray, start: float = 0.5, full: float = 0.75) -> np.ndarray:
+    """0…1 per frame: how far the late-stance roll-off (:func:`roll_off`) applies — 0 until
+    ``start`` of each contact (where :func:`flat_weight` lets the heel rise), 1 from ``full`` on."""
+    out = np.zeros(len(contact))
+    if not contact.any() or contact.all():
+        return out
+    shift = int(np.argmin(contact))
+    c = np.roll(contact, -shift)
+    for s, e in _intervals(c):
+        u = (np.arange(s, e) - s + 0.5) / (e - s)
+        out[s:e] = np.clip((u - start) / (full - start), 0.0, 1.0)
+    return np.roll(out, shift)
 
 
 def early_stance(contact: np.ndarray) -> np.ndarray:
@@ -341,6 +496,45 @@ def leg_reach(gpos: np.ndarray, roles: dict, side: str) -> float:
     return float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee)) * REACH_FRACTION
 
 
+def _turn_about(pivot, arm, axis, angle):
+    """``pivot + arm`` turned by ``angle`` (radians, per row) about ``axis`` through ``pivot``."""
+    return pivot + quat.rotate(quat.from_axis_angle(axis * angle[:, None]), arm)
+
+
+def _bisect(f, lo, hi, iterations: int = 30):
+    """Per row, the angle in [lo, hi] where the boolean ``f`` turns from True to False."""
+    for _ in range(iterations):
+        mid = (lo + hi) / 2
+        go = f(mid)
+        lo, hi = np.where(go, mid, lo), np.where(go, hi, mid)
+    return hi
+
+
+def roll_off(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.ndarray, planted: np.ndarray,
+             want: np.ndarray, weight: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ankle targets and foot rotations with the foot turned about its planted ball or toe so that
+    the hip-to-ankle distance moves towards ``want`` (T, the source's: its knee bend) by
+    ``weight`` (T, 0…1), never beyond ``reach``.
+
+    A knee near full extension turns hip-to-ankle distance into large angles (1 cm ≈ 18°), so
+    a planted foot held at its source pitch straightens or snaps the knee in late stance; the
+    heel pitch takes up the distance instead. The foot turns heel-up at most
+    :data:`MAX_HEEL_RISE_DEG` and heel-down no further than flat (no sole point below the one it
+    stands on). Frames not planted on a point ahead of the ankle, or with zero weight, are kept.
+
+    >>> hip = np.array([[0.0, 0.9, 0.0]])
+    >>> ball = np.array([[[0.0, -0.07, 0.15], [0.0, -0.07, -0.05]]])   # ball, heel (ankle-relative)
+    >>> t, f = roll_off(hip, np.array([[0.0, 0.07, -0.4]]), ball, np.array([[1.0, 0, 0, 0]]), np.array([0]),
+    ...                 np.array([0.9]), np.array([1.0]), 0.95)
+    >>> round(float(np.linalg.norm(t[0] - hip[0])), 3), bool(t[0, 1] > 0.07)
+    (0.9, True)
+    """
+    todo = np.flatnonzero(_planted_ahead(target, offsets, foot, planted) & (weight > 0))
+    now = np.linalg.norm(target[todo] - hip[todo], axis=1)
+    goal = np.minimum(now + weight[todo] * (want[todo] - now), reach)
+    return _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down=True)
+
+
 def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.ndarray, reach: float,
               planted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Ankle targets (T×3) and foot world rotations (T×4) with the heel raised where out of reach.
@@ -359,13 +553,45 @@ def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np
     >>> round(float(np.linalg.norm(t[0] - up[0])), 3), bool(t[0, 1] > 0.07)
     (0.95, True)
     """
-    target, foot = target.copy(), foot.copy()
+    far = np.linalg.norm(target - hip, axis=1) > reach
+    todo = np.flatnonzero(_planted_ahead(target, offsets, foot, planted) & far)
+    return _turn_heel(hip, target, offsets, foot, planted, todo, np.full(len(todo), reach), heel_down=False)
+
+
+def _planted_ahead(target, offsets, foot, planted) -> np.ndarray:
+    """Frames whose planted sole point lies ahead of the ankle (a ball or toe, not the heel)."""
     pivot = target + offsets[np.arange(len(target)), np.maximum(planted, 0)]
     forward = quat.rotate(foot, np.array([0.0, 0.0, 1.0]))
-    ahead = np.einsum("ij,ij->i", (pivot - target)[:, [0, 2]], forward[:, [0, 2]]) > 0
-    todo = np.flatnonzero((planted >= 0) & ahead & (np.linalg.norm(target - hip, axis=1) > reach))
+    return (planted >= 0) & (np.einsum("ij,ij->i", (pivot - target)[:, [0, 2]], forward[:, [0, 2]]) > 0)
+
+
+def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool):
+    """Turn the foot of frames ``todo`` about its planted point until the ankle is ``goal`` from
+    the hip: heel-up at most :data:`MAX_HEEL_RISE_DEG`, heel-down (if allowed) until flat."""
+    target, foot = target.copy(), foot.copy()
     if not len(todo):
         return target, foot
+    idx = planted[todo]
+    pivot = target[todo] + offsets[todo, idx]
+    arm = target[todo] - pivot
+    axis = np.cross(arm, np.array([0.0, 1.0, 0.0]))
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+    lo = np.zeros(len(todo))
+    if heel_down:
+        # The other sole points relative to the planted one: heel-down stops where one touches.
+        others = offsets[todo] - offsets[todo, idx][:, None]
+
+        def below(angle):
+            q = quat.from_axis_angle(axis * angle[:, None])
+            return np.min([quat.rotate(q, others[:, k])[:, 1] for k in range(others.shape[1])], axis=0) < -1e-4
+
+        lo = _bisect(below, np.full(len(todo), -np.radians(60.0)), lo)
+    # The distance to the hip shrinks as the heel rises.
+    angle = _bisect(lambda a: np.linalg.norm(_turn_about(pivot, arm, axis, a) - hip[todo], axis=1) > goal,
+                    lo, np.full(len(todo), np.radians(MAX_HEEL_RISE_DEG)))
+    target[todo] = _turn_about(pivot, arm, axis, angle)
+    foot[todo] = quat.mul(quat.from_axis_angle(axis * angle[:, None]), foot[todo])
+    return target, foot
     arm = target[todo] - pivot[todo]
     axis = np.cross(arm, np.array([0.0, 1.0, 0.0]))
     axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)

@@ -366,8 +366,8 @@ def generate(params: GaitParams, height_m: float = 1.75, fps: float = 30.0, cycl
     m = m.replace(metadata=meta)
     if cleanup:
         floor = -skeleton_floor(m)
-        m = clean_feet(m, stance, belt_speed=p.speed_mps, floor_y=floor, cyclic=True,
-                       clearance_m=SWING_CLEARANCE_M[p.gait])
+        # The swing clearance only in the last pass: each pass would turn the toes up again.
+        m = clean_feet(m, stance, belt_speed=p.speed_mps, floor_y=floor, cyclic=True)
         planted = m
         m = balance(m, stance, floor_y=floor)
         m = clean_feet(m, stance, belt_speed=p.speed_mps, floor_y=floor, cyclic=True,
