@@ -36,8 +36,9 @@ REACH_FRACTION = 0.995
 MAX_HEEL_RISE_DEG = 35.0
 # Shape of the swing clearance's descent (see swing_clearance).
 LANDING_POWER = 0.75
-# Clearance from the first frame of swing on (skating counts points within 1 cm of the ground).
-LIFT_OFF_CLEARANCE_M = 0.015
+# Clearance from the first to the last frame of swing (skating counts points within 1 cm of the
+# ground that move).
+SWING_MIN_CLEARANCE_M = 0.015
 # Most a swinging foot's toes turn up to clear the ground (swing dorsiflexion: from about 15°
 # plantar flexion at toe off to neutral).
 MAX_TOE_LIFT_DEG = 15.0
@@ -301,11 +302,11 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
 def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
     """Minimum height of the lowest sole point over each swing, peaking at ``height`` mid-swing.
 
-    The foot clears :data:`LIFT_OFF_CLEARANCE_M` from the first frame of swing (no toe grazing
-    the belt after push-off), then the half sine; a square-rooted half sine, steeper, asked a jog's
-    toes for 3.7 cm one frame after toe off where the source has 1.5–2.2 cm, and the lift bent the
-    knee 5–15° in that frame. It comes down more gently (the half sine to the power
-    :data:`LANDING_POWER`): the
+    The foot clears :data:`SWING_MIN_CLEARANCE_M` in every frame of swing (no toe grazing the
+    belt after push-off, no heel before landing) and follows the half sine after push-off; a
+    square-rooted half sine, steeper, asked a jog's toes for 3.7 cm one frame after toe off where
+    the source has 1.5–2.2 cm, and the lift bent the knee 5–15° in that frame. It comes down more
+    gently (the half sine to the power :data:`LANDING_POWER`): the
     leg is almost straight then, and every cm of lift late in swing costs degrees of knee flexion
     (last three frames before heel strike: 39/29/22° square-rooted, 37/26/17° here, 18/8/5° in
     the uncleaned normative angles); a plain or squared sine let the heel graze the belt (5–8 % of
@@ -319,8 +320,8 @@ def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
     for s, e in _intervals(~c):
         u = (np.arange(s, e) - s + 1) / (e - s + 1)
         rise = np.sin(np.pi * u)
-        out[s:e] = np.where(u < 0.5, np.maximum(min(LIFT_OFF_CLEARANCE_M, height), height * rise),
-                            height * rise**LANDING_POWER)
+        out[s:e] = np.maximum(min(SWING_MIN_CLEARANCE_M, height),
+                              height * np.where(u < 0.5, rise, rise**LANDING_POWER))
     return np.roll(out, shift)
 
 
