@@ -55,6 +55,22 @@ def factor_codes(col: pd.Series) -> tuple[np.ndarray, tuple[str, ...]]:
     return rank[codes], tuple(str(u) for u in uniques[order])
 
 
+def _rare_levels(index, codes: dict, levels: dict, within, scode: np.ndarray, subjects, limit: int = 3) -> str:
+    """Within levels that fewer subjects have than the factor's other levels, with their rows: one odd
+    level (a typo such as 'wlak') is why every subject then misses cells."""
+    notes = []
+    for f in within:
+        have = [len(np.unique(scode[codes[f] == i])) for i in range(len(levels[f]))]
+        for i, n_subjects in enumerate(have):
+            if n_subjects <= max(have) / 2:   # clearly odd, not one subject short of a common level
+                rows = index[codes[f] == i]
+                who = ", ".join(repr(subjects[j]) for j in np.unique(scode[codes[f] == i])[:limit])
+                notes.append(f"level {levels[f][i]!r} of {f} appears only at row index {_rows(rows)} "
+                             f"(subject{'s' if n_subjects > 1 else ''} {who}{' …' if n_subjects > limit else ''})")
+    shown = "; ".join(notes[:limit])
+    return shown + (f"; and {len(notes) - limit} more such level(s)" if len(notes) > limit else "")
+
+
 def prepare(
     data: pd.DataFrame,
     dv: str,
@@ -150,9 +166,11 @@ def prepare(
 
         more = f" and {len(cells) - 1} more cell(s)" if len(cells) > 1 else ""
         others = f"; {len(subj_missing)} subjects have missing cells" if len(subj_missing) > 1 else ""
+        rare = _rare_levels(data.index, codes, levels, within, scode, subjects)
         raise AnalysisError(
-            f"subject {subjects[s]!r} has no data for cell {cell(cells[0])}{more}{others}; "
-            "a repeated-measures ANOVA needs every subject in every within cell"
+            f"subject {subjects[s]!r} has no data for cell {cell(cells[0])}{more}{others}"
+            + (f"; {rare}" if rare else "")
+            + "; a repeated-measures ANOVA needs every subject in every within cell"
         )
     design = Design(
         within={f: levels[f] for f in within},

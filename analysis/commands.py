@@ -67,16 +67,45 @@ def parse_abbreviations(items: list[str]) -> dict:
     return out
 
 
+def check_abbreviations(abbreviations: dict, data, factors: list[str]) -> None:
+    """Every ``--abbrev`` must name a factor of the analysis and one of its levels (else it would do nothing)."""
+    levels = {f: {str(v) for v in data[f].dropna().unique()} for f in factors if f in data}
+    for key, value in abbreviations.items():
+        if isinstance(value, dict):
+            if key not in levels:
+                raise AnalysisError(f"--abbrev {key}:…: {key!r} is not a factor of the analysis "
+                                    f"(factors: {', '.join(factors)})")
+            for level in value:
+                if level not in levels[key]:
+                    raise AnalysisError(f"--abbrev {key}:{level}={value[level]}: {level!r} is not a level of {key} "
+                                        f"(levels: {', '.join(sorted(levels[key]))})")
+        elif not any(key in found for found in levels.values()):
+            known = "; ".join(f"{f}: {', '.join(sorted(v))}" for f, v in levels.items())
+            raise AnalysisError(f"--abbrev {key}={value}: {key!r} is not a level of any factor ({known})")
+
+
 def read_csv(path: str):
     """Read a CSV for analysis; the index becomes the CSV line number so that errors point at lines."""
+    import csv
+
     import pandas as pd
 
     if not Path(path).is_file():
         raise AnalysisError(f"{path}: no such file")
     try:
+        with open(path, newline="", encoding="utf-8-sig") as handle:
+            header = next(csv.reader(handle), [])
         data = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, csv.Error) as exc:
         raise AnalysisError(f"{path}: not a readable CSV file ({str(exc).strip()})") from None
+    # pandas renames a repeated header to "rating.1" and the analysis would silently use the first one
+    names = list(header)
+    repeated = sorted({h for h in names if names.count(h) > 1})
+    if repeated:
+        where = "; ".join(f"{h!r} in columns {', '.join(str(i + 1) for i, n in enumerate(names) if n == h)}"
+                          for h in repeated)
+        raise AnalysisError(f"{path}: line 1: the header names a column more than once ({where}); "
+                            f"each column needs its own name")
     data.index = pd.RangeIndex(2, len(data) + 2)  # line 1 is the header
     return data
 
@@ -92,9 +121,13 @@ def _write(path: str, text: str) -> None:
 
 def run_anova(args: argparse.Namespace) -> int:
     from analysis.anova import anova
+    from analysis.io_files import check_output_file
     from analysis.posthoc import tukey_all
     from analysis.tables import render
 
+    for option, path in (("--out", args.out), ("--json", args.json)):
+        if path:
+            check_output_file(path, option, [args.data])
     abbreviations = parse_abbreviations(args.abbrev)
     data = read_csv(args.data)
     try:
@@ -102,6 +135,7 @@ def run_anova(args: argparse.Namespace) -> int:
                       alpha=args.alpha)
     except AnalysisError as exc:
         raise AnalysisError(f"{args.data}: {str(exc).replace('at row index', 'on CSV line')}") from None
+    check_abbreviations(abbreviations, data, [*args.within, *args.between])
     if args.posthoc == "tukey":
         effects = list(table.effects.index) if args.all else table.significant(correction=args.correction)
         tukey_all(table, effects=effects, abbreviations=abbreviations)

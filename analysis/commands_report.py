@@ -69,18 +69,35 @@ def _register_simulate(subparsers) -> None:
 
 def run_simulate(args) -> int:
     from analysis.io_design import load_design
-    from analysis.io_files import atomic_write_text
+    from analysis.io_files import atomic_write_text, check_output_file
     from analysis.io_writers import export_text
     from analysis.model_spec import load_model
     from analysis.simulate import simulate_responses
+    out = check_output_file(args.out, "--out", _inputs(args))
     design = load_design(args.dir)
     model = load_model(args.model, design)
+    _note_null_model(args, model, design)
     sim = simulate_responses(design, model, args.participants, args.seed)
-    out = Path(args.out)
     atomic_write_text(out, export_text(sim, design, args.format, out.suffix, seed=args.seed))
     print(f"wrote {out}: {args.participants} participants, {int((~sim['practice']).sum())} test answers "
           f"({args.format}, model {model.name})")
     return 0
+
+
+def _inputs(args) -> list:
+    """The files simulate and power read (an output must never overwrite one of them)."""
+    design = Path(args.dir)
+    return [design / name for name in ("design.json", "conditions.csv", "trials.csv", "manifest.csv")] + [args.model]
+
+
+def _note_null_model(args, model, design) -> None:
+    """Say when the default model is the null model, so that nobody mistakes it for the protocol's effects."""
+    if args.model is None and model.name == "null":
+        name = design.protocol.get("name")
+        why = (f"no bundled model for design {name!r}" if name else
+               f"{design.directory / 'design.json'} names no protocol (fields 'name' and 'protocol.name' missing)")
+        print(f"note: {why}; using the null model (no condition effects); pass --model M.yaml for others",
+              file=sys.stderr)
 
 
 # -- power ----------------------------------------------------------------------------------------------
@@ -108,11 +125,18 @@ def _register_power(subparsers) -> None:
 
 def run_power(args) -> int:
     from analysis.io_design import load_design
-    from analysis.io_files import atomic_write_text
+    from analysis.io_files import atomic_write_text, check_output_file
     from analysis.model_spec import load_model
-    from analysis.power import power_sweep, required_participants
+    from analysis.power import check_target, power_sweep, required_participants
+    from analysis.simulate import check_seed
+    # options first: a bad one must not cost a whole simulation before it is reported
+    if args.csv:
+        check_output_file(args.csv, "--csv", _inputs(args))
+    check_seed(args.seed)
+    check_target(args.target)
     design = load_design(args.dir)
     model = load_model(args.model, design)
+    _note_null_model(args, model, design)
     if args.alpha is not None and not 0 < args.alpha < 1:
         raise AnalysisError(f"--alpha: expected a number between 0 and 1, got {args.alpha}")
     table = power_sweep(design, model, args.participants, args.sims, args.seed, args.alpha,
@@ -163,6 +187,8 @@ def run_analyze(args) -> int:
     print(f"{imp['rows']} rows: {imp['imported_rows']} imported, {imp['excluded_rows']} excluded "
           f"({', '.join(f'{k}: {v}' for k, v in imp['excluded_by_reason'].items()) or 'none'}); "
           f"{imp['participants']} participants")
+    if imp["columns_not_imported"]:
+        print(f"columns not imported: {', '.join(imp['columns_not_imported'])} (see exclusions.csv)")
     for section in summary["sections"]:
         significant = section.get("results", {}).get("significant")
         if significant is not None:

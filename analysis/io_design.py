@@ -139,14 +139,22 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
                       manifest: pd.DataFrame | None, directory: Path) -> DesignInfo:
     """Build a :class:`DesignInfo` from already-read parts; checks the fields the analysis relies on."""
     where = directory / "design.json"
-    protocol = meta.get("protocol") or {}
+    if not isinstance(meta, dict):
+        raise AnalysisError(f"{where}: expected a JSON object with fields factors, response, protocol, …; "
+                            f"got a {type(meta).__name__}")
+    protocol = dict(_mapping(meta, "protocol", where))
+    # a design.json from another tool may carry these at the top level only; the analysis reads them from
+    # the protocol (the name picks the bundled simulation model, repetitions the valid repetition numbers)
+    for key in ("name", "repetitions"):
+        if protocol.get(key) is None and meta.get(key) is not None:
+            protocol[key] = meta[key]
     factors = [_factor(f, where) for f in _need(meta, "factors", where, protocol)]
-    response = meta.get("response") or protocol.get("response") or {}
+    response = _mapping(meta, "response", where) or _mapping(protocol, "response", where, "protocol.")
     rtype = response.get("type")
     if rtype not in MEASURE_OF_TYPE:
         raise AnalysisError(f"{where}: response.type must be likert, afc or ranking, got {rtype!r}")
     labels = [str(x) for x in response.get("labels") or []]
-    analysis = protocol.get("analysis") or {}
+    analysis = _mapping(protocol, "analysis", where, "protocol.")
     measure = meta.get("dependent_measure") or analysis.get("dependent_measure") or MEASURE_OF_TYPE[rtype]
     chosen = meta.get("chosen_factor") or next((f.name for f in factors if f.role == "alternatives"), None)
     if rtype in ("afc", "ranking") and chosen is None:
@@ -159,14 +167,15 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
     if rtype == "likert" and k < 2:
         raise AnalysisError(f"{where}: a likert response needs at least 2 labels or k >= 2")
     conditions = _normalise_conditions(conditions, factors, directory / "conditions.csv")
+    _check_trial_stimuli(trials, conditions, directory / "trials.csv")
     return DesignInfo(directory=directory, protocol=protocol, factors=factors, response_type=rtype, labels=labels,
                       k=k, dependent_measure=measure, chosen_factor=chosen,
                       participants=int(meta.get("participants") or protocol.get("participants") or 0),
                       seed=int(meta.get("seed") if meta.get("seed") is not None else protocol.get("seed", 0)),
                       conditions=conditions, trials=trials, manifest=manifest,
-                      alpha=float((meta.get("analysis") or analysis).get("alpha", 0.05)),
+                      alpha=float((_mapping(meta, "analysis", where) or analysis).get("alpha", 0.05)),
                       position_labels=[str(x) for x in response.get("position_labels") or []],
-                      posthoc=str((meta.get("analysis") or analysis).get("posthoc", "tukey")))
+                      posthoc=str((_mapping(meta, "analysis", where) or analysis).get("posthoc", "tukey")))
 
 
 def _factor(raw: dict, where: Path) -> FactorInfo:
@@ -176,6 +185,30 @@ def _factor(raw: dict, where: Path) -> FactorInfo:
                           maps_to=str(raw.get("maps_to") or "none"))
     except (KeyError, TypeError) as exc:
         raise AnalysisError(f"{where}: each factor needs name, role and levels; got {raw!r} ({exc})") from None
+
+
+def _mapping(meta: dict, key: str, where: Path, prefix: str = "") -> dict:
+    """An optional JSON object field (``{}`` when absent); anything else is refused with its name."""
+    value = meta.get(key)
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise AnalysisError(f"{where}: field {prefix}{key!r} must be a JSON object, got {type(value).__name__} "
+                            f"{str(value)[:40]!r}")
+    return value
+
+
+def _check_trial_stimuli(trials: pd.DataFrame | None, conditions: pd.DataFrame, where: Path) -> None:
+    """Every trial shows a stimulus of conditions.csv (else simulation and survey cannot place it)."""
+    if trials is None:
+        return
+    known = set(conditions["stimulus_id"])
+    unknown = ~trials["stimulus_id"].astype(str).isin(known)
+    if unknown.any():
+        i = int(unknown.to_numpy().argmax())
+        more = f" ({int(unknown.sum())} rows in all)" if unknown.sum() > 1 else ""
+        raise AnalysisError(f"{where}: row {i + 2}: stimulus_id {trials['stimulus_id'].iloc[i]!r} is not a stimulus "
+                            f"of conditions.csv{more}")
 
 
 def _need(meta: dict, key: str, where: Path, protocol: dict):

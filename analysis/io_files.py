@@ -15,6 +15,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from analysis.errors import AnalysisError
+
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file in the same directory."""
@@ -39,6 +41,60 @@ def _umask() -> int:
 
 def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def check_output_file(path: str | Path, option: str, inputs: list[str | Path] = ()) -> Path:
+    """Refuse an output file path that cannot be written, before any work is done.
+
+    Checked up front so that a long simulation does not end in a traceback: the path must not be a
+    folder, no existing part of its parent path may be a file, and it must not be one of ``inputs``
+    (writing the result over the data it came from).
+
+    >>> import tempfile, pathlib
+    >>> check_output_file(pathlib.Path(tempfile.mkdtemp()), "--out")   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    analysis.errors.AnalysisError: --out ...: is a folder; expected a file name
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise AnalysisError(f"{option} {path}: is a folder; expected a file name")
+    _check_parents(path, option)
+    for given in inputs:
+        if given is not None and Path(given).resolve() == path.resolve():
+            raise AnalysisError(f"{option} {path}: is the input {given}; choose another file name")
+    return path
+
+
+def check_output_folder(path: str | Path, option: str, inputs: list[str | Path] = ()) -> Path:
+    """Refuse an output folder that would replace a file, or an input, before any work is done.
+
+    The report folder replaces an existing folder of the same name as a whole, so ``path`` must not be
+    (or contain) one of ``inputs`` and must not be a file.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise AnalysisError(f"{option} {path}: exists and is not a folder; expected a folder for the report")
+    _check_parents(path, option)
+    target = path.resolve()
+    for given in inputs:
+        source = Path(given).resolve()
+        if source == target or target in source.parents:
+            raise AnalysisError(f"{option} {path}: would replace the input {given}; choose another folder")
+    return path
+
+
+def _check_parents(path: Path, option: str) -> None:
+    """The nearest existing ancestor of ``path`` must be a writable folder (else writing fails at the end).
+
+    The stimuli side has its own copy (``stimuli.fileio``): analysis never imports stimuli.
+    """
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise AnalysisError(f"{option} {path}: {parent} is a file, not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise AnalysisError(f"{option} {path}: the folder {parent} is not writable")
+            return
 
 
 def replace_directory(staging: Path, target: Path) -> None:

@@ -27,7 +27,7 @@ from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.measures import measure_arrays, within_levels
 from analysis.model_spec import GenerativeModel
-from analysis.simulate import TrialPlan, draw, trial_plan
+from analysis.simulate import TrialPlan, check_seed, draw, trial_plan
 
 CHUNK = 250   # data sets per vectorised batch: bounded memory, frequent progress updates
 
@@ -87,6 +87,7 @@ def power_analysis(design: DesignInfo, model: GenerativeModel, participants: int
         raise AnalysisError(f"--correction: expected none, gg or hf, got {correction!r}")
     if sims < 1:
         raise AnalysisError(f"--sims: expected a positive number of simulated data sets, got {sims}")
+    check_seed(seed)
     alpha = design.alpha if alpha is None else alpha
     rng = np.random.default_rng([seed, participants])
     plan = trial_plan(design, participants)
@@ -158,6 +159,10 @@ def _trials_per_participant(plan: TrialPlan) -> int:
 def power_sweep(design: DesignInfo, model: GenerativeModel, participants: list[int], sims: int, seed: int,
                 alpha: float | None = None, progress: bool = False, correction: str = "none") -> pd.DataFrame:
     """:func:`power_analysis` for each N; one row per N × effect, plus data sets per second."""
+    repeated = sorted({n for n in participants if list(participants).count(n) > 1})
+    if repeated:   # one column per N in the table: a repeat would only cost time and break the layout
+        raise AnalysisError(f"--participants: N = {', '.join(map(str, repeated))} given more than once; "
+                            f"list each number of participants once")
     frames = []
     for n in participants:
         result = power_analysis(design, model, n, sims, seed, alpha, progress, correction)
@@ -168,12 +173,19 @@ def power_sweep(design: DesignInfo, model: GenerativeModel, participants: list[i
 
 def required_participants(sweep: pd.DataFrame, effect: str, target: float = 0.8) -> int | None:
     """The smallest N of the sweep whose estimated power on ``effect`` reaches ``target`` (None if none)."""
+    check_target(target)
     wanted = _canonical(effect)
     rows = sweep[sweep["effect"].map(_canonical) == wanted]
     if rows.empty:
         raise AnalysisError(f"--effect: {effect!r} is not one of the effects {sorted(sweep['effect'].unique())}")
     hits = rows[rows["power"] >= target]
     return int(hits["participants"].min()) if not hits.empty else None
+
+
+def check_target(target: float) -> None:
+    """Power is a probability: a target of 0 is always met and one of 1 or more never is."""
+    if not 0 < target < 1:
+        raise AnalysisError(f"--target: expected a power between 0 and 1 (e.g. 0.8), got {target:g}")
 
 
 def _canonical(name: str) -> frozenset:

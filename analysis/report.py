@@ -25,7 +25,7 @@ import pandas as pd
 
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo, load_design
-from analysis.io_files import replace_directory
+from analysis.io_files import check_output_folder, replace_directory
 from analysis.measures import (anova_input, binomial_first, chi2_votes, friedman, percent_chosen, rank_points,
                                vote_counts)
 from analysis.responses import ImportResult, import_responses
@@ -36,20 +36,65 @@ MAX_INTERACTION_FIGURES = 8
 
 def analyze(design_dir: str | Path, responses: str | Path, out: str | Path, models: bool = True) -> dict:
     """Run the whole analysis; returns the summary written to ``summary.json``."""
+    # checked before any work: the report folder replaces what is there, so it must never be a file or an input
+    check_output_folder(out, "--out", [design_dir, responses])
     design = load_design(design_dir)
     imported = import_responses(responses, design)
     if imported.data.empty or (~imported.data["practice"]).sum() == 0:
         raise AnalysisError(f"{responses}: no participant is left after the exclusions "
-                            f"({imported.summary()['excluded_by_reason']}); nothing to analyse")
+                            f"({imported.summary()['excluded_by_reason']}); nothing to analyse. "
+                            f"{exclusion_examples(imported.exclusions)}")
+    _check_between_levels(design, imported, responses)
     out = Path(out)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent if out.parent.exists() else None))
     try:
         context = _write_all(design, imported, staging, models)
         replace_directory(staging, out)
+    except AnalysisError as exc:   # e.g. too few participants left: name the file and who was excluded
+        shutil.rmtree(staging, ignore_errors=True)
+        raise AnalysisError(f"{responses}: {exc}. {excluded_participants(imported)}".rstrip(". ")) from None
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return context["summary"]
+
+
+def _check_between_levels(design: DesignInfo, imported: ImportResult, responses) -> None:
+    """A between factor needs two levels among the participants kept; say which exclusions removed the others."""
+    kept = imported.data[~imported.data["practice"]]
+    for name in design.between:
+        left = sorted(set(kept[name]))
+        if len(design.factor(name).levels) > 1 and len(left) < 2:
+            excluded = excluded_participants(imported)
+            found = (f"after the exclusions only {name} = {', '.join(left)} is left" if excluded else
+                     f"the responses hold only {name} = {', '.join(left)}")
+            raise AnalysisError(f"{responses}: {found}, so the between factor {name} cannot be analysed (it needs "
+                                f"at least two levels). {excluded}".rstrip())
+
+
+def excluded_participants(imported: ImportResult, limit: int = 3) -> str:
+    """``Excluded: participant '1' (several between-subject groups: …), …`` — who is missing and why."""
+    rows = imported.exclusions.dropna(subset=["row"])
+    kept = set(imported.data["participant"])
+    gone = rows[(rows["participant"] != "") & ~rows["participant"].isin(kept)].drop_duplicates("participant")
+    if gone.empty:
+        return ""
+    first = gone[["participant", "reason", "detail"]].head(limit).itertuples(index=False)
+    shown = "; ".join(f"participant {p!r} ({reason}: {detail})" for p, reason, detail in first)
+    more = f"; and {len(gone) - limit} more (exclusions.csv lists them)" if len(gone) > limit else ""
+    return f"Excluded: {shown}{more}"
+
+
+def exclusion_examples(exclusions: pd.DataFrame) -> str:
+    """One example row per exclusion reason, with its detail and column, for error messages."""
+    rows = exclusions.dropna(subset=["row"])
+    parts = []
+    for reason, group in rows.groupby("reason", sort=False):
+        first = group.iloc[0]
+        named = first["column"] and first["column"] != "response" and repr(first["column"]) not in first["detail"]
+        column = f" [column {first['column']!r}]" if named else ""
+        parts.append(f"{reason}: e.g. row {first['row']}: {first['detail']}{column}")
+    return ("; ".join(parts) + ".") if parts else ""
 
 
 def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bool) -> dict:
@@ -71,7 +116,9 @@ def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bo
                "sections": [{k: v for k, v in s.items() if k in ("title", "results")} for s in sections]}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, ensure_ascii=False, default=_plain) + "\n")
     context = {"summary": summary, "sections": sections, "imported": imported, "design": design,
-               "exclusions": imported.exclusions.fillna("").to_dict("records"), "versions": software_versions()}
+               # object first: the Int64 row column cannot hold the "" shown for column-level notes
+               "exclusions": imported.exclusions.astype(object).fillna("").to_dict("records"),
+               "versions": software_versions()}
     (out / "report.html").write_text(render_report(context, out), encoding="utf-8")
     return context
 

@@ -12,6 +12,7 @@ analysis (:func:`draw`).
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,31 +35,37 @@ class TrialPlan:
 
 
 def trial_plan(design: DesignInfo, participants: int) -> TrialPlan:
-    """Trial lists for ``participants`` people, reusing the design's lists cyclically beyond its N.
+    """Trial lists for ``participants`` people, reusing the design's lists beyond its N.
 
-    The design's participants are balanced over between groups, so participant p gets the list of the
-    design's participant ((p−1) mod N_design)+1; N must be a multiple of the number of groups.
+    Participant p gets the list of the design's participant ((p−1) mod N_design)+1 when that keeps the
+    between groups equal (N a multiple of the design's balanced N); otherwise the groups take turns
+    (as the protocol's ``assignment: balanced`` promises), each reusing its own design participants in
+    order. N must be a positive multiple of the number of groups.
     """
     if design.trials is None:
         raise AnalysisError(f"{design.directory}: trials.csv is missing; it lists each participant's trials")
+    where = design.directory / "trials.csv"
     trials = design.trials.copy()
+    for column in ("practice", "trial", "repetition"):
+        if column not in trials:
+            raise AnalysisError(f"{where}: column {column!r} is missing; simulation needs it")
     kind = trials["kind"] if "kind" in trials else np.where(_as_bool(trials["practice"]), "practice", "test")
     trials = trials[pd.Series(kind, index=trials.index) != "familiarization"]
     trials["practice"] = _as_bool(trials["practice"])
-    trials["participant"] = trials["participant"].astype(int)
-    base = sorted(trials["participant"].unique())
+    for column in ("participant", "trial", "repetition"):
+        trials[column] = _integers(trials[column], column, where)
     n_groups = max(1, len(design.test_conditions[design.between].drop_duplicates())) if design.between else 1
-    if participants < 1 or participants % n_groups:
+    if participants < 1:
+        raise AnalysisError(f"--participants: expected a positive number of participants, got {participants}")
+    if participants % n_groups:
         raise AnalysisError(f"--participants: {participants} participants cannot be balanced over {n_groups} "
                             f"between-subject groups; use a multiple of {n_groups}")
     parts = []
-    for p in range(1, participants + 1):
-        source = trials[trials["participant"] == base[(p - 1) % len(base)]].copy()
+    for p, base in enumerate(_assign(design, trials, participants), start=1):
+        source = trials[trials["participant"] == base].copy()
         source["participant"] = p
         parts.append(source)
     plan = pd.concat(parts, ignore_index=True)
-    plan["trial"] = plan["trial"].astype(int)
-    plan["repetition"] = plan["repetition"].astype(int)
     stimuli = list(design.conditions["stimulus_id"])
     index = {s: i for i, s in enumerate(stimuli)}
     test = plan[~plan["practice"]]
@@ -70,6 +77,67 @@ def trial_plan(design: DesignInfo, participants: int) -> TrialPlan:
     groups = plan.groupby("participant")[design.between].first().reset_index() if design.between else \
         pd.DataFrame({"participant": range(1, participants + 1)})
     return TrialPlan(plan, stimuli, matrix, groups)
+
+
+def _assign(design: DesignInfo, trials: pd.DataFrame, participants: int) -> list[int]:
+    """The design participant whose trial list each of the ``participants`` simulated people reuses.
+
+    Cycling through the design's list keeps the data of N = N_design (and its multiples) as before; when
+    cycling would leave the between groups unequal (e.g. N = 4 from a design whose first four are
+    F, M, M, M), the groups take turns instead.
+    """
+    base = sorted(trials["participant"].unique())
+    cyclic = [base[p % len(base)] for p in range(participants)]
+    if not design.between:
+        return cyclic
+    group_of = _groups_of(design, trials)
+    members: dict[tuple, list[int]] = {}
+    for b in base:
+        members.setdefault(group_of[b], []).append(b)
+    counts = Counter(group_of[b] for b in cyclic)
+    if len(counts) == len(members) and len(set(counts.values())) == 1:
+        return cyclic
+    order = list(members)   # groups in the order of their first design participant
+    members = {g: _interleave_block_orders(m, trials) for g, m in members.items()}
+    out = []
+    for p in range(participants):
+        group = members[order[p % len(order)]]
+        out.append(group[(p // len(order)) % len(group)])
+    return out
+
+
+def _interleave_block_orders(members: list[int], trials: pd.DataFrame) -> list[int]:
+    """A group's design participants with their block orders taking turns (jog-first, walk-first, …), so
+    that the first few simulated people of a group are counterbalanced too."""
+    if "block_label" not in trials:
+        return members
+    test = trials.sort_values("trial", kind="stable")
+    signature = {p: tuple(dict.fromkeys(rows["block_label"])) for p, rows in test.groupby("participant")}
+    by_order: dict[tuple, list[int]] = {}
+    for m in members:
+        by_order.setdefault(signature[m], []).append(m)
+    queues = list(by_order.values())
+    return [q[i] for i in range(max(map(len, queues))) for q in queues if i < len(q)]
+
+
+def _groups_of(design: DesignInfo, trials: pd.DataFrame) -> dict[int, tuple]:
+    """Between group of each design participant: trials.csv's columns, else the stimuli of their test trials."""
+    if all(b in trials for b in design.between):
+        first = trials.groupby("participant")[design.between].first()
+        return {p: tuple(str(v) for v in row) for p, row in zip(first.index, first.itertuples(index=False))}
+    stimuli = design.stimulus_table()
+    tests = trials[~trials["practice"]].groupby("participant")["stimulus_id"].first()
+    return {p: tuple(str(stimuli.loc[s, b]) for b in design.between) for p, s in tests.items()}
+
+
+def _integers(column: pd.Series, name: str, where) -> pd.Series:
+    """A whole-number column of trials.csv; a bad cell names its row (line 1 is the header)."""
+    numbers = pd.to_numeric(column, errors="coerce")
+    bad = numbers.isna() | (numbers % 1 != 0)
+    if bad.any():
+        row = int(np.flatnonzero(bad.to_numpy())[0])
+        raise AnalysisError(f"{where}: row {column.index[row] + 2}: {name} {column.iloc[row]!r} is not a whole number")
+    return numbers.astype(int)
 
 
 def _as_bool(series: pd.Series) -> pd.Series:
@@ -163,6 +231,7 @@ def simulate_responses(design: DesignInfo, model: GenerativeModel, participants:
     ``rating`` (Likert), ``position`` (1-based, k-AFC) or ``order`` (positions best first, 1-based,
     ``|``-joined, ranking); ``rt`` in seconds.
     """
+    check_seed(seed)
     rng = np.random.default_rng(seed)
     plan = trial_plan(design, participants)
     test_answers = draw(design, model, plan, rng, sims=1)[0]
@@ -178,6 +247,12 @@ def simulate_responses(design: DesignInfo, model: GenerativeModel, participants:
     trials[column] = values
     trials["rt"] = np.round(rng.lognormal(np.log(2.5), 0.35, len(trials)), 3)
     return trials
+
+
+def check_seed(seed: int) -> None:
+    """numpy seeds are non-negative integers; say so instead of numpy's traceback."""
+    if seed < 0:
+        raise AnalysisError(f"--seed: expected a non-negative whole number, got {seed}")
 
 
 def _practice_plan(design: DesignInfo, plan: TrialPlan) -> TrialPlan | None:

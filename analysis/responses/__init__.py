@@ -75,13 +75,43 @@ def import_responses(path: str | Path, design: DesignInfo) -> ImportResult:
     if Path(path).is_dir():
         return import_folder(Path(path), design)
     raw = read_response_file(path)
+    check_protocol(raw, design)
     tags = _tag_index(design)
     if raw.format.startswith("qualtrics"):
         answers, exclusions = qualtrics_answers(raw, tags, design.between, design.response_type == "ranking")
     else:
-        answers, exclusions = trialwise_answers(raw, design.between)
-    data, excluded = assemble(answers, exclusions, raw.row_numbers, design, trialwise=not raw.format.startswith("qualtrics"))
+        answers, exclusions = trialwise_answers(raw, design.between, design.within)
+    try:
+        data, excluded = assemble(answers, exclusions, raw.row_numbers, design,
+                                  trialwise=not raw.format.startswith("qualtrics"))
+    except AnalysisError as exc:   # the checks name row and column; the file is known here
+        raise AnalysisError(f"{path}: {exc}") from None
     return ImportResult(Path(path), raw.format, data, excluded, raw.n_rows)
+
+
+def protocol_columns(raw: RawFile) -> list[str]:
+    """Columns in which the survey exports record the protocol's name: the Qualtrics embedded field
+    ``shapemotion_protocol``; jsPsych's ``protocol`` data property."""
+    names = ["shapemotion_protocol"] + (["protocol"] if raw.format.startswith("jspsych") else [])
+    return [n for n in names if n in raw.columns]
+
+
+def check_protocol(raw: RawFile, design: DesignInfo) -> None:
+    """Refuse an export whose recorded protocol is not the design's: every answer would be excluded (or,
+    worse, matched to the wrong stimuli) instead of naming the real cause."""
+    expected = str(design.protocol.get("name") or "")
+    if not expected:
+        return
+    for column in protocol_columns(raw):
+        for number, record in zip(raw.row_numbers, raw.rows):
+            value = record.get(column) if isinstance(record, dict) else \
+                (record[raw.columns.index(column)] if raw.columns.index(column) < len(record) else "")
+            value = str(value if value is not None else "").strip()
+            if value and value != expected:
+                raise AnalysisError(
+                    f"{raw.path}: row {number}: column {column!r} says the responses are from protocol {value!r}, "
+                    f"but the design {design.directory} is {expected!r}; analyse them against the design of "
+                    f"{value!r}")
 
 
 def _tag_index(design: DesignInfo) -> TagIndex:

@@ -24,6 +24,8 @@ class Answer:
     rt: float | None = None
     ranks: list[str] | None = None
     groups: dict[str, str] = field(default_factory=dict)   # between levels the file declares
+    declared: dict[str, str] = field(default_factory=dict)  # other factor levels the file states (checked)
+    numbered: bool = False         # repetition counted by the importer, not stated in the file
 
 
 @dataclass

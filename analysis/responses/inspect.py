@@ -39,7 +39,9 @@ def inspect_file(path: str | Path) -> dict:
     rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
     answers = [r for r in rows if str(r.get("stimulus_id") or "").strip()]
     pid = _participant_column(raw.columns)
-    info |= {"responses": len(answers), "participants": len({str(r.get(pid)) for r in answers}) if pid else 1,
+    # without a participant column the file is one participant's data (jsPsych saves one file each)
+    people = len({str(r.get(pid)) for r in answers}) if pid else int(bool(answers))
+    info |= {"responses": len(answers), "participants": people,
              "columns": [{"name": c, "kind": "column", "question_text": "", "import_id": ""} for c in raw.columns]}
     return info
 

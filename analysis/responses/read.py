@@ -96,6 +96,13 @@ def _read_json(path: Path, text: str) -> RawFile:
         data = data.get("trials", [data])
     if not isinstance(data, list) or not all(isinstance(x, dict) for x in data):
         raise AnalysisError(f"{path}: expected jsPsych JSON data: a list of trial objects")
+    if not data:
+        raise AnalysisError(f"{path}: the file holds no responses (an empty list of trials)")
+    # every jsPsych trial carries trial_type, trial_index, … ; without them this is some other JSON file
+    if not any(JSPSYCH_MARKERS & trial.keys() or "stimulus_id" in trial for trial in data):
+        keys = list(dict.fromkeys(k for trial in data for k in trial))[:6]
+        raise AnalysisError(f"{path}: not a jsPsych export: no trial has {sorted(JSPSYCH_MARKERS)} or stimulus_id "
+                            f"(found keys {keys})")
     columns = list(dict.fromkeys(k for trial in data for k in trial))
     return RawFile(path, "jspsych-json", columns, rows=data, row_numbers=list(range(1, len(data) + 1)))
 

@@ -3,11 +3,13 @@
 Rules, in order (each excluded row is listed once, with the first reason that applies):
 1. the reader's own (malformed row, unfinished, preview/test, not a stimulus trial, duplicate participant id);
 2. answers to stimuli the design does not know (long formats: that row);
-3. duplicate answers (same participant, stimulus and repetition);
+3. duplicate answers (same participant, stimulus and repetition) and repetitions outside the design's 1…n;
 4. answers outside the response scale (the whole row: in a Qualtrics export that is the participant);
 5. participants whose answers span several between-subject groups;
 6. participants with missing cells (a design cell without any valid answer): all their rows.
 Rows with no answer at all are listed as "no answers". ``imported rows + excluded rows = rows in the file``.
+A factor level a row states that contradicts its stimulus's level in conditions.csv is an error, not an
+exclusion: the file and the design disagree about what was shown.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from collections import Counter, defaultdict
 
 import pandas as pd
 
+from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import Answer, Exclusion
 from analysis.responses.scoring import OutsideScale, score_choice, score_likert, score_ranking
@@ -39,6 +42,7 @@ def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int]
             drop(a, "unknown stimulus", f"stimulus_id {a.stimulus_id!r} is not in conditions.csv")
         else:
             kept.append(a)
+    check_declared_levels(kept, stimuli)
     kept = _number_repetitions(kept, trialwise)
     kept = _drop_duplicates(kept, drop, design.repetitions, stimuli)
     scored = []
@@ -63,6 +67,23 @@ def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int]
     return table, frame
 
 
+def check_declared_levels(answers: list[Answer], stimuli: pd.DataFrame) -> None:
+    """A factor column of the file must agree with the stimulus's level (case and spacing aside)."""
+    for a in answers:
+        for factor, value in a.declared.items():
+            level = str(stimuli.loc[a.stimulus_id].get(factor, ""))
+            if level and value.strip().casefold() != level.casefold():
+                raise AnalysisError(f"row {a.row}: column {factor!r} is {value!r}, but stimulus {a.stimulus_id} has "
+                                    f"{factor} = {level!r} in conditions.csv; the file and the design disagree")
+
+
+def rows_text(rows) -> str:
+    """``row 5`` / ``rows 2, 3, 9`` / ``rows 2, 3, 4, 5, 6 … (72 rows)`` for messages."""
+    rows = sorted(set(rows))
+    shown = ", ".join(str(r) for r in rows[:5]) + (f" … ({len(rows)} rows)" if len(rows) > 5 else "")
+    return f"row{'s' if len(rows) > 1 else ''} {shown}"
+
+
 def _number_repetitions(answers: list[Answer], trialwise: bool) -> list[Answer]:
     """Repetitions the file does not state are numbered by presentation (or row) order."""
     counter: Counter = Counter()
@@ -70,6 +91,7 @@ def _number_repetitions(answers: list[Answer], trialwise: bool) -> list[Answer]:
         if a.repetition is None:
             counter[(a.participant, a.stimulus_id)] += 1
             a.repetition = counter[(a.participant, a.stimulus_id)]
+            a.numbered = True
     if trialwise:  # presentation order within a participant = row order when no trial number is given
         order: Counter = Counter()
         for a in sorted(answers, key=lambda a: a.row):
@@ -79,13 +101,21 @@ def _number_repetitions(answers: list[Answer], trialwise: bool) -> list[Answer]:
 
 
 def _drop_duplicates(answers: list[Answer], drop, repetitions: int, stimuli: pd.DataFrame) -> list[Answer]:
-    """Same participant, stimulus and repetition twice, or more showings of a test clip than the design has."""
+    """Same participant, stimulus and repetition twice, more showings of a test clip than the design has, or
+    a repetition the file states outside the design's 1…n."""
+    stated = defaultdict(list)   # row → its answers whose stated repetition the design does not have
+    for a in answers:
+        if not a.numbered and _outside(a, repetitions, stimuli):
+            stated[a.row].append(a)
     first: dict[tuple, int] = {}
     out = []
     for a in sorted(answers, key=lambda a: a.row):
-        if a.repetition > repetitions and not stimuli.loc[a.stimulus_id, "practice"]:
+        if a.numbered and _outside(a, repetitions, stimuli):
             drop(a, "duplicate answer", f"participant {a.participant!r} answered {a.stimulus_id} {a.repetition} "
                                         f"times; the design shows it {repetitions} time(s)")
+            continue
+        if any(a is b for b in stated.get(a.row, ())):
+            drop(a, "repetition outside the design", _outside_detail(stated[a.row], repetitions))
             continue
         key = (a.participant, a.stimulus_id, a.repetition)
         if key in first and first[key] != a.row:
@@ -95,6 +125,22 @@ def _drop_duplicates(answers: list[Answer], drop, repetitions: int, stimuli: pd.
         first.setdefault(key, a.row)
         out.append(a)
     return out
+
+
+def _outside(a: Answer, repetitions: int, stimuli: pd.DataFrame) -> bool:
+    """A test answer whose repetition is not one of the design's 1…n (practice clips may repeat freely)."""
+    return not (1 <= a.repetition <= repetitions) and not stimuli.loc[a.stimulus_id, "practice"]
+
+
+def _outside_detail(answers: list[Answer], repetitions: int) -> str:
+    """Name the column(s) that state a repetition the design does not have (Qualtrics: the export tags)."""
+    if answers[0].column == "response":   # one-row-per-answer formats state it in the ``repetition`` column
+        a = answers[0]
+        return (f"column 'repetition' is {a.repetition} for {a.stimulus_id}; the design shows each stimulus "
+                f"{repetitions} time(s) (repetition 1…{repetitions})")
+    columns = ", ".join(f"{a.column!r} (repetition {a.repetition} of {a.stimulus_id})" for a in answers)
+    return (f"column{'s' if len(answers) > 1 else ''} {columns}: the design shows each stimulus {repetitions} "
+            f"time(s) (repetition 1…{repetitions}); is the export from another design?")
 
 
 def _score(a: Answer, design: DesignInfo) -> dict:
@@ -112,17 +158,41 @@ def _check_groups(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
     if not design.between:
         return scored
     groups = defaultdict(set)
+    evidence = defaultdict(list)   # participant → (row, group of the stimulus, group the file states)
     for a, _ in scored:
         row = stimuli.loc[a.stimulus_id]
-        groups[a.participant].add(tuple(str(row.get(b, "")) for b in design.between))
-        if a.groups:
-            groups[a.participant].add(tuple(a.groups.get(b, str(row.get(b, ""))) for b in design.between))
+        shown = tuple(str(row.get(b, "")) for b in design.between)
+        stated = tuple(a.groups.get(b, shown[i]) for i, b in enumerate(design.between)) if a.groups else shown
+        groups[a.participant] |= {shown, stated}
+        evidence[a.participant].append((a.row, shown, stated))
+    details = {p: _groups_detail(evidence[p], design.between) for p, g in groups.items() if len(g) > 1}
     for a, _ in scored:
-        if len(groups[a.participant]) > 1:
-            found = sorted("/".join(g) for g in groups[a.participant])
-            drop(a, "several between-subject groups",
-                 f"{'×'.join(design.between)} levels {found} in one participant's answers")
+        if a.participant in details:
+            drop(a, "several between-subject groups", details[a.participant])
     return scored
+
+
+def _groups_detail(evidence: list[tuple], between: list[str]) -> str:
+    """Which rows put one participant in which between group: stimuli of several groups, or a group
+    column that contradicts the stimuli answered."""
+    def name(group: tuple) -> str:
+        return ", ".join(f"{b}={v}" for b, v in zip(between, group))
+
+    found = sorted({"/".join(g) for _, shown, stated in evidence for g in (shown, stated)})
+    parts = []
+    by_shown = defaultdict(list)
+    for row, shown, _ in evidence:
+        by_shown[shown].append(row)
+    if len(by_shown) > 1:
+        parts.append("stimuli of " + " and ".join(f"{name(g)} ({rows_text(r)})" for g, r in sorted(by_shown.items())))
+    conflicts = defaultdict(list)
+    for row, shown, stated in evidence:
+        if stated != shown:
+            conflicts[(stated, shown)].append(row)
+    for (stated, shown), rows in sorted(conflicts.items()):
+        parts.append(f"the file's {'/'.join(between)} column says {name(stated)} for a stimulus of {name(shown)} "
+                     f"({rows_text(rows)})")
+    return f"{'×'.join(between)} levels {found} in one participant's answers: {'; '.join(parts)}"
 
 
 def _cell_key(row: pd.Series, factors: list[str]) -> tuple:

@@ -16,8 +16,18 @@ from analysis.responses.answers import Answer, Exclusion
 from analysis.responses.read import RawFile, _participant_column
 
 
-def trialwise_answers(raw: RawFile, between: list[str]):
-    """Answers and row exclusions of a jsPsych or long file (one row per answer)."""
+# Long-CSV columns the importer reads, or that restate the design (what ``simulate --format long`` writes).
+LONG_COLUMNS = {"stimulus_id", "response", "button_pressed", "rt", "rt_ms", "repetition", "trial", "block",
+                "block_label", "practice", "kind", "condition_id", "left", "right", "positions", "end",
+                "shapemotion_protocol"}
+
+
+def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
+    """Answers and row exclusions of a jsPsych or long file (one row per answer).
+
+    Levels of the ``within`` factors that a row states are kept in ``Answer.declared`` so that the
+    importer can check them against the stimulus (a contradiction is an error, never ignored).
+    """
     rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
     pid_col = _participant_column(raw.columns)
     jspsych = raw.format.startswith("jspsych")
@@ -40,8 +50,22 @@ def trialwise_answers(raw: RawFile, between: list[str]):
         if not pid:
             exclusions.append(Exclusion(number, pid, "no participant id", f"column {pid_col!r} is empty"))
             continue
-        answers.append(_answer(record, number, pid, sid, jspsych, between))
+        answers.append(_answer(record, number, pid, sid, jspsych, between, within))
+    if raw.format == "long":
+        exclusions += unread_columns(raw, [*between, *within])
     return answers, exclusions
+
+
+def unread_columns(raw: RawFile, factors: list[str]) -> list[Exclusion]:
+    """Column notes for the long-CSV columns the importer does not read (e.g. a free-text comment).
+
+    Listed like the Qualtrics columns that name no stimulus, so nothing a user gave disappears unmentioned.
+    """
+    known = LONG_COLUMNS | set(factors) | {_participant_column(raw.columns)}
+    return [Exclusion(None, "", "column not imported", f"column {name!r} is not a column the long format reads "
+                                                       f"(participant, stimulus_id, response, rt, repetition, trial, "
+                                                       f"factor columns, …); column not imported", name)
+            for name in raw.columns if name not in known]
 
 
 def _finished(rows: list[dict], pid_col: str | None, raw: RawFile) -> set[str]:
@@ -50,7 +74,8 @@ def _finished(rows: list[dict], pid_col: str | None, raw: RawFile) -> set[str]:
             if _text(r.get("end")).lower() in ("1", "true")}
 
 
-def _answer(record: dict, number: int, pid: str, sid: str, jspsych: bool, between: list[str]) -> Answer:
+def _answer(record: dict, number: int, pid: str, sid: str, jspsych: bool, between: list[str],
+            within: list[str] = ()) -> Answer:
     value, ranks = _response(record.get("response", record.get("button_pressed")), jspsych)
     rt = _number(record.get("rt"))
     if rt is not None and jspsych:
@@ -60,8 +85,9 @@ def _answer(record: dict, number: int, pid: str, sid: str, jspsych: bool, betwee
     rep = _number(record.get("repetition"))
     trial = _number(record.get("trial"))  # jsPsych's trial_index counts every row; order is re-derived later
     groups = {n: _text(record.get(n)) for n in between if _text(record.get(n))}
+    declared = {n: _text(record.get(n)) for n in within if _text(record.get(n))}
     return Answer(number, pid, sid, value, "response", int(rep) if rep is not None else None,
-                  int(trial) if trial is not None else None, rt, ranks, groups)
+                  int(trial) if trial is not None else None, rt, ranks, groups, declared)
 
 
 def _response(raw, jspsych: bool) -> tuple[str, list[str] | None]:

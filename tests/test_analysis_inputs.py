@@ -1,0 +1,363 @@
+"""Bad input to the analysis commands: exit code 2, a message naming the file, option, row or column and what
+was expected, no traceback, nothing written over and nothing a user gave dropped without a note.
+
+One test (or a few) per defect of the input-validation review; each failed before its fix.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from analysis.errors import AnalysisError
+from analysis.io_design import load_design
+from analysis.io_writers import export_text
+from analysis.model_spec import load_model
+from analysis.simulate import simulate_responses, trial_plan
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def flat(text: str) -> str:
+    """Without white space: the CLI wraps long messages, also inside hyphenated names."""
+    return re.sub(r"\s+", "", text)
+
+
+def says(err: str, *parts: str) -> bool:
+    return all(flat(p) in flat(err) for p in parts)
+
+
+@pytest.fixture(scope="module")
+def designs(tmp_path_factory):
+    """Design directories of Exp. 1 (SEX between, 2 repetitions) and Exp. 2, as `shapemotion design` writes them."""
+    from stimuli.cli import main
+    out = {}
+    for name in ("exp1_shape_motion", "exp2_com_vs_average"):
+        folder = tmp_path_factory.mktemp(name) / "design"
+        assert main(["design", str(ROOT / "protocols" / f"{name}.yaml"), "--participants", "16", "--seed", "3",
+                     "--out", str(folder)]) == 0
+        out[name] = folder
+    return out
+
+
+def responses(design_dir: Path, path: Path, fmt: str, participants: int = 4, seed: int = 2) -> Path:
+    """Simulated responses to the design in ``fmt`` written to ``path``."""
+    design = load_design(design_dir)
+    sim = simulate_responses(design, load_model(None, design), participants, seed)
+    path.write_text(export_text(sim, design, fmt, path.suffix, seed=seed), encoding="utf-8")
+    return path
+
+
+def rewrite_csv(path: Path, edit) -> Path:
+    """Apply ``edit(rows)`` to the CSV rows of ``path`` in place."""
+    rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"), newline="")))
+    edit(rows)
+    buffer = io.StringIO()
+    csv.writer(buffer, lineterminator="\n").writerows(rows)
+    path.write_text(buffer.getvalue(), encoding="utf-8")
+    return path
+
+
+# -- 1. analyze --out --------------------------------------------------------------------------------------
+
+def test_analyze_out_that_is_a_file_is_refused_and_left_alone(designs, run_cli, tmp_path):
+    answers = responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "qualtrics")
+    before = answers.read_bytes()
+    other = tmp_path / "notes.txt"
+    other.write_text("keep me")
+    for out in (other, answers):
+        code, _, err = run_cli("analyze", designs["exp1_shape_motion"], "--responses", answers, "--out", out)
+        assert code == 2 and says(err, f"--out {out}: exists and is not a folder") and "Traceback" not in err
+    assert other.read_text() == "keep me" and answers.read_bytes() == before
+    assert not (tmp_path / ".notes.txt.old").exists() and not (tmp_path / ".r.csv.old").exists()
+
+
+def test_analyze_out_never_replaces_an_input_folder(designs, run_cli, tmp_path):
+    design = tmp_path / "design"
+    shutil.copytree(designs["exp1_shape_motion"], design)
+    answers = responses(design, design / "r.csv", "qualtrics")
+    code, _, err = run_cli("analyze", design, "--responses", answers, "--out", design)
+    assert code == 2 and says(err, "would replace the input")
+    assert (design / "design.json").exists() and answers.exists()
+
+
+# -- 2. a Qualtrics column not in the design -----------------------------------------------------------------
+
+def test_analyze_lists_qualtrics_columns_not_imported_and_still_works(designs, run_cli, tmp_path):
+    answers = responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "qualtrics")
+    rewrite_csv(answers, lambda rows: rows[0].__setitem__(rows[0].index("F-walk-Hi1-Hi1_r1"), "F-wlak-Hi1-Hi1_r1"))
+    code, out, err = run_cli("analyze", designs["exp1_shape_motion"], "--responses", answers,
+                             "--out", tmp_path / "report", "--no-models")
+    assert code == 0, err
+    assert "columns not imported: F-wlak-Hi1-Hi1_r1" in out
+    exclusions = pd.read_csv(tmp_path / "report" / "exclusions.csv", keep_default_na=False)
+    assert "F-wlak-Hi1-Hi1_r1" in set(exclusions["column"])
+    assert "F-wlak-Hi1-Hi1_r1" in (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
+
+
+# -- 3. long CSV: extra and contradicting columns ------------------------------------------------------------
+
+def test_long_csv_extra_column_is_reported_as_not_imported(designs, run_cli, tmp_path):
+    answers = rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"),
+                          lambda rows: [r.append("comment" if i == 0 else "ok") for i, r in enumerate(rows)])
+    code, out, err = run_cli("responses", "inspect", answers, "--design", designs["exp1_shape_motion"])
+    assert code == 0, err
+    assert "columns not imported: comment" in out
+
+
+def test_long_csv_factor_column_that_contradicts_the_design_is_an_error(designs, run_cli, tmp_path):
+    def gait_walk(rows):
+        for i, r in enumerate(rows):
+            r.append("GAIT" if i == 0 else "walk")
+
+    answers = rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"), gait_walk)
+    data = pd.read_csv(answers)
+    line = int(data.index[data["stimulus_id"].str.contains("-jog-")][0]) + 2
+    code, _, err = run_cli("analyze", designs["exp1_shape_motion"], "--responses", answers, "--out", tmp_path / "out")
+    assert code == 2 and says(err, f"r.csv: row {line}: column 'GAIT' is 'walk'", "GAIT = 'jog'")
+    assert not (tmp_path / "out").exists()
+
+
+# -- 4. repetitions outside the design ------------------------------------------------------------------------
+
+def test_qualtrics_column_with_a_repetition_the_design_lacks_is_named(designs, run_cli, tmp_path):
+    def add_r3(rows):
+        i = rows[0].index("F-walk-Hi1-Hi1_r2") + 1
+        extra = ["F-walk-Hi1-Hi1_r3", "Q - F-walk-Hi1-Hi1_r3", '{"ImportId":"QID999"}'] + ["3"] * (len(rows) - 3)
+        for row, cell in zip(rows, extra):
+            row.insert(i, cell)
+
+    answers = rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "qualtrics"), add_r3)
+    code, _, err = run_cli("analyze", designs["exp1_shape_motion"], "--responses", answers, "--out", tmp_path / "out")
+    assert code == 2 and says(err, "repetition outside the design", "'F-walk-Hi1-Hi1_r3' (repetition 3")
+    assert "duplicate answer" not in err
+
+
+def test_long_csv_repetition_outside_the_range_is_not_called_a_duplicate(designs, tmp_path):
+    def rep7(rows):
+        i, practice = rows[0].index("repetition"), rows[0].index("practice")
+        next(r for r in rows[1:] if r[practice] == "0")[i] = "7"
+
+    design = load_design(designs["exp1_shape_motion"])
+    from analysis.responses import import_responses
+    result = import_responses(rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"),
+                                          rep7), design)
+    excluded = result.exclusions.dropna(subset=["row"])
+    assert list(excluded["reason"]) == ["repetition outside the design"]
+    assert "column 'repetition' is 7" in excluded["detail"].iloc[0] and "times" not in excluded["detail"].iloc[0]
+    assert result.reconciles
+
+
+# -- 5. a between factor left with one level ------------------------------------------------------------------
+
+def test_lost_between_level_names_the_file_and_the_excluded_participant(designs, run_cli, tmp_path):
+    """Two participants, one per SEX; one row of participant 1 states the other SEX."""
+    flip = {"F": "M", "M": "F"}
+    found = {}
+
+    def participant_1_says_the_other_sex(rows):
+        sex, practice = rows[0].index("SEX"), rows[0].index("practice")
+        row = next(r for r in rows[1:] if r[0] == "1" and r[practice] == "0")
+        found["own"] = row[sex]
+        row[sex] = flip[row[sex]]
+
+    answers = rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long", participants=2),
+                          participant_1_says_the_other_sex)
+    own, other = found["own"], flip[found["own"]]
+    code, _, err = run_cli("analyze", designs["exp1_shape_motion"], "--responses", answers, "--out", tmp_path / "out")
+    assert code == 2 and "Traceback" not in err
+    assert says(err, f"r.csv: after the exclusions only SEX = {other} is left", "participant '1'",
+                "several between-subject groups", f"says SEX={other} for a stimulus of SEX={own}")
+
+
+# -- 6. JSON that holds no jsPsych responses ------------------------------------------------------------------
+
+@pytest.mark.parametrize("text, message", [("[]", "holds no responses"), ('{"x": 1}', "not a jsPsych export")])
+def test_inspect_json_without_responses_exits_2(run_cli, tmp_path, text, message):
+    path = tmp_path / "data.json"
+    path.write_text(text)
+    code, out, err = run_cli("responses", "inspect", path)
+    assert code == 2 and says(err, "data.json", message) and "participants" not in out
+
+
+# -- 7. responses of another protocol ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("fmt, suffix, column", [("qualtrics", ".csv", "shapemotion_protocol"),
+                                                 ("jspsych", ".json", "protocol")])
+def test_responses_of_another_protocol_are_refused(designs, run_cli, tmp_path, fmt, suffix, column):
+    answers = responses(designs["exp2_com_vs_average"], tmp_path / f"r{suffix}", fmt)
+    code, _, err = run_cli("analyze", designs["exp1_shape_motion"], "--responses", answers, "--out", tmp_path / "out")
+    assert code == 2 and says(err, f"column '{column}' says the responses are from protocol 'exp2_com_vs_average'",
+                              "is 'exp1_shape_motion'")
+
+
+# -- 8. design directories --------------------------------------------------------------------------------------
+
+def copy_design(designs, tmp_path) -> Path:
+    folder = tmp_path / "design"
+    shutil.copytree(designs["exp1_shape_motion"], folder)
+    return folder
+
+
+def test_design_json_that_is_a_list_is_refused(designs, run_cli, tmp_path):
+    folder = copy_design(designs, tmp_path)
+    (folder / "design.json").write_text("[1, 2]")
+    for command in (["simulate", folder, "--participants", "2", "--seed", "1", "--out", tmp_path / "x.csv"],
+                    ["analyze", folder, "--responses", tmp_path / "x.csv", "--out", tmp_path / "out"]):
+        code, _, err = run_cli(*command)
+        assert code == 2 and says(err, "design.json: expected a JSON object") and "Traceback" not in err
+
+
+def test_design_json_without_protocol_names_the_model_used(designs, run_cli, tmp_path):
+    folder = copy_design(designs, tmp_path)
+    meta = json.loads((folder / "design.json").read_text())
+    del meta["protocol"]
+    (folder / "design.json").write_text(json.dumps(meta))
+    assert load_design(folder).repetitions == 2          # the top-level field, not a silent default of 1
+    code, out, _ = run_cli("simulate", folder, "--participants", "2", "--seed", "1", "--out", tmp_path / "a.csv")
+    assert code == 0 and "model exp1_shape_motion" in out
+    del meta["name"]
+    (folder / "design.json").write_text(json.dumps(meta))
+    code, out, err = run_cli("simulate", folder, "--participants", "2", "--seed", "1", "--out", tmp_path / "b.csv")
+    assert code == 0 and "model null" in out and says(err, "names no protocol", "using the null model")
+
+
+def test_trials_with_an_unknown_stimulus_name_file_row_and_id(designs, run_cli, tmp_path):
+    folder = copy_design(designs, tmp_path)
+    rewrite_csv(folder / "trials.csv", lambda rows: rows[2].__setitem__(rows[0].index("stimulus_id"), "F-wlak-X"))
+    code, _, err = run_cli("simulate", folder, "--participants", "2", "--seed", "1", "--out", tmp_path / "x.csv")
+    assert code == 2 and says(err, "trials.csv: row 3: stimulus_id 'F-wlak-X' is not a stimulus of conditions.csv")
+
+
+# -- 9. power and simulate options ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("options, message", [
+    (["--participants", "4", "4"], "--participants: N = 4 given more than once"),
+    (["--participants", "4", "--target", "1.5"], "--target: expected a power between 0 and 1"),
+    (["--participants", "4", "--target", "-1"], "--target: expected a power between 0 and 1"),
+    (["--participants", "4", "--seed", "-1"], "--seed: expected a non-negative whole number"),
+])
+def test_power_refuses_bad_options(designs, run_cli, options, message):
+    code, out, err = run_cli("power", designs["exp1_shape_motion"], "--sims", "5", *options)
+    assert code == 2 and says(err, message) and "Traceback" not in err and out == ""
+
+
+def test_power_csv_path_is_checked_before_the_simulation(designs, run_cli, tmp_path):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    for path, message in ((tmp_path, "is a folder"), (blocker / "p.csv", "is a file, not a folder")):
+        code, out, err = run_cli("power", designs["exp1_shape_motion"], "--participants", "4", "--sims", "5",
+                                 "--csv", path)
+        assert code == 2 and says(err, f"--csv {path}", message) and out == ""
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--participants", "0", "--seed", "1"], "--participants: expected a positive number of participants, got 0"),
+    (["--participants", "2", "--seed", "-5"], "--seed: expected a non-negative whole number, got -5"),
+])
+def test_simulate_refuses_bad_options(designs, run_cli, tmp_path, options, message):
+    code, _, err = run_cli("simulate", designs["exp1_shape_motion"], *options, "--out", tmp_path / "x.csv")
+    assert code == 2 and says(err, message) and not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("participants", [2, 4, 6, 16, 20])
+def test_simulated_participants_are_balanced_over_between_groups(designs, participants):
+    plan = trial_plan(load_design(designs["exp1_shape_motion"]), participants)
+    counts = plan.groups["SEX"].value_counts()
+    assert set(counts.index) == {"F", "M"} and counts["F"] == counts["M"] == participants // 2
+
+
+def test_four_simulated_participants_are_counterbalanced_within_groups(designs):
+    plan = trial_plan(load_design(designs["exp1_shape_motion"]), 4)
+    first_block = plan.trials.sort_values("trial").groupby("participant")["block_label"].first()
+    sex = plan.groups.set_index("participant")["SEX"]
+    for group in ("F", "M"):
+        assert sorted(first_block[sex[sex == group].index]) == ["GAIT=jog", "GAIT=walk"]
+
+
+def test_sixteen_simulated_participants_keep_the_design_lists(designs):
+    design = load_design(designs["exp1_shape_motion"])
+    plan = trial_plan(design, 16)
+    expected = design.trials.assign(participant=design.trials["participant"].astype(int))
+    for p in (1, 2, 16):
+        mine = plan.trials[plan.trials["participant"] == p]["stimulus_id"].tolist()
+        assert mine == expected[expected["participant"] == p]["stimulus_id"].tolist()
+
+
+# -- 10. output file paths ---------------------------------------------------------------------------------------
+
+def test_output_files_under_a_file_or_onto_a_folder_are_refused(designs, run_cli, tmp_path):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    data = tmp_path / "data.csv"
+    data.write_text("s,g,y\n" + "".join(f"{s},{g},{s * 2 + (g == 'b') + (s % 2) * (g == 'a')}\n"
+                                        for s in range(1, 5) for g in "ab"))
+    cases = [
+        (["simulate", designs["exp1_shape_motion"], "--participants", "2", "--seed", "1", "--out", tmp_path],
+         f"--out {tmp_path}: is a folder"),
+        (["simulate", designs["exp1_shape_motion"], "--participants", "2", "--seed", "1", "--out", blocker / "x.csv"],
+         "is a file, not a folder"),
+        (["anova", data, "--dv", "y", "--subject", "s", "--within", "g", "--out", blocker / "x.md"],
+         f"--out {blocker / 'x.md'}: {blocker} is a file"),
+        (["anova", data, "--dv", "y", "--subject", "s", "--within", "g", "--json", blocker / "x.json"],
+         f"--json {blocker / 'x.json'}: {blocker} is a file"),
+        (["anova", data, "--dv", "y", "--subject", "s", "--within", "g", "--out", data], "is the input"),
+    ]
+    for command, message in cases:
+        code, _, err = run_cli(*command)
+        assert code == 2 and says(err, message) and "Traceback" not in err, command
+    assert blocker.read_text() == "x" and data.read_text().startswith("s,g,y")
+
+
+# -- 11. anova options and data -----------------------------------------------------------------------------------
+
+@pytest.fixture
+def anova_csv(tmp_path):
+    """4 subjects × GAIT (walk, jog) × BODY (Hi1, Lo1), one rating per cell."""
+    rows = [f"{s},{g},{b},{(s * 7 + len(g) * 3 + (b == 'Lo1') * 2) % 5 + 1}"
+            for s in range(1, 5) for g in ("walk", "jog") for b in ("Hi1", "Lo1")]
+    path = tmp_path / "d.csv"
+    path.write_text("subject,GAIT,BODY,rating\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("abbrev, message", [("Hi9=X", "'Hi9' is not a level of any factor"),
+                                             ("FOO:Hi1=X", "'FOO' is not a factor"),
+                                             ("BODY:walk=X", "'walk' is not a level of BODY")])
+def test_anova_abbreviation_of_an_unknown_level_or_factor(anova_csv, run_cli, abbrev, message):
+    code, _, err = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY",
+                           "--posthoc", "tukey", "--abbrev", abbrev)
+    assert code == 2 and says(err, f"--abbrev {abbrev.split('=')[0].split(':')[0]}", message)
+
+
+def test_anova_duplicate_header_is_named(anova_csv, run_cli):
+    lines = anova_csv.read_text().splitlines()
+    anova_csv.write_text("\n".join([lines[0] + ",rating"] + [line + ",1" for line in lines[1:]]) + "\n")
+    code, _, err = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY")
+    assert code == 2 and says(err, "d.csv: line 1", "'rating' in columns 4, 5")
+
+
+def test_anova_level_typo_names_its_line(anova_csv, run_cli):
+    lines = anova_csv.read_text().splitlines()
+    lines[2] = lines[2].replace(",walk,", ",wlak,")   # CSV line 3
+    anova_csv.write_text("\n".join(lines) + "\n")
+    assert ",wlak," in lines[2]
+    code, _, err = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY")
+    assert code == 2 and says(err, "level 'wlak' of GAIT appears only on CSV line 3")
+
+
+# -- 12. duplicate keys in a model file ---------------------------------------------------------------------------
+
+def test_model_yaml_with_a_duplicate_key_is_refused(designs, tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text("name: m\neffects:\n  - term: BODY\n    values: {Hi2: -0.12, Hi2: 0.90}\n"
+                    "thresholds: [-1.5, -0.5, 0.5, 1.5]\n")
+    with pytest.raises(AnalysisError, match=r"m\.yaml: line 4: key 'Hi2' appears twice"):
+        load_model(path, load_design(designs["exp1_shape_motion"]))
