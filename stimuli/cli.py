@@ -58,12 +58,19 @@ def main(argv: list[str] | None = None) -> int:
     except (StimuliError, AnalysisError) as exc:
         print_user_error(exc)
         return 2
-    except KeyboardInterrupt:
-        print("shapemotion: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:
+        # A safety net: commands check their output paths up front, but a path the system refuses
+        # (a file where a folder should be, no permission, a full disk) is the user's to fix too.
+        if exc.filename is None:
+            raise
+        print_user_error(f"{exc.filename}: {exc.strerror or exc}")
+        return 2
+    except KeyboardInterrupt:
+        print("shapemotion: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

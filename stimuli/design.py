@@ -226,6 +226,8 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     seed = protocol.seed if seed is None else seed
     if n < 1:
         raise StimuliError(f"--participants: expected a positive number, got {n}")
+    if seed < 0:  # numpy seeds are non-negative; a negative one would stop with a numpy traceback
+        raise StimuliError(f"--seed: expected a whole number >= 0, got {seed}")
     between = protocol.factors_with_role("between")
     group_cells = [dict(zip([f.name for f in between], c)) for c in itertools.product(*(f.levels for f in between))]
     if n % len(group_cells):

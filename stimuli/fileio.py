@@ -8,6 +8,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from stimuli.errors import StimuliError
+
 
 def csv_text(rows: list[dict[str, object]]) -> str:
     """Rows (dicts with the same keys, in column order) as CSV text with a header and '\\n' line ends."""
@@ -52,3 +54,49 @@ def write_all_or_nothing(out_dir: str | Path, files: dict[str, str]) -> list[Pat
         atomic_write_text(out_dir / name, text)
         written.append(out_dir / name)
     return written
+
+
+def check_output_file(path: str | Path | None, option: str = "--out") -> Path | None:
+    """Fail before any work when ``path`` cannot become a file: it is a folder, or a file stands where
+    one of its folders should be, or that folder is read-only. ``None`` (option not given) passes.
+
+    Checked up front so that a command never computes for minutes and then fails on writing, nor
+    writes one output and fails on the next.
+
+    >>> check_output_file("out/clip.mp4")
+    PosixPath('out/clip.mp4')
+    """
+    if path is None:
+        return None
+    path = Path(path)
+    if path.is_dir():
+        raise StimuliError(f"{option} {path}: is a folder; expected a file name")
+    _check_parent_folder(path, option)
+    return path
+
+
+def check_output_dir(path: str | Path | None, option: str = "--out") -> Path | None:
+    """Fail before any work when ``path`` cannot become (or be) a folder of outputs (see
+    :func:`check_output_file`). ``None`` passes."""
+    if path is None:
+        return None
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise StimuliError(f"{option} {path}: is a file; expected a folder")
+    if path.is_dir():
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise StimuliError(f"{option} {path}: the folder is not writable")
+        return path
+    _check_parent_folder(path, option)
+    return path
+
+
+def _check_parent_folder(path: Path, option: str) -> None:
+    """The nearest existing ancestor of ``path`` must be a writable folder (missing ones are made)."""
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise StimuliError(f"{option} {path}: {parent} is a file, not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise StimuliError(f"{option} {path}: the folder {parent} is not writable")
+            return

@@ -27,6 +27,18 @@ from stimuli.errors import StimuliError
 # What a factor's levels mean on screen.
 MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "parameter", "source", "view", "none"]
 SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+# The human ranges of a body (metres, kg/m²): the protocol's actors and the CLI's --height/--bmi/girths.
+HEIGHT_RANGE_M = (1.2, 2.3)
+BMI_RANGE = (13.0, 60.0)
+GIRTH_RANGES_M = {"waist_m": (0.4, 2.0), "hip_m": (0.5, 2.0), "chest_m": (0.5, 2.0)}
+BODY_FAT_RANGE_PCT = (0.0, 70.0)
+# The level settings the renderer reads, by the maps_to of the factors they belong to (None: any factor).
+LEVEL_SETTINGS = {"view_deg": None, "modifies": ("parameter",), "motion": ("source", "method"),
+                  "base_scale": ("source",)}
+SOURCE_MOTIONS = ("lean_walk", "modifier", "generator")  # or "bvh:<path>"
+# METHOD levels (NoCOM/COM) name their motions themselves; the setting only documents them (Exp 2).
+METHOD_MOTIONS = ("average", "physics")
+HEX_COLOUR = re.compile(r"^#?[0-9A-Fa-f]{6}$")
 
 
 class Strict(BaseModel):
@@ -41,13 +53,13 @@ class Actor(Strict):
     id: str
     label: str
     sex: Literal["F", "M"]
-    height_m: float = Field(ge=1.2, le=2.3, description="standing height in metres")
-    bmi: float = Field(ge=13.0, le=60.0, description="body-mass index in kg/m²")
+    height_m: float = Field(ge=HEIGHT_RANGE_M[0], le=HEIGHT_RANGE_M[1], description="standing height in metres")
+    bmi: float = Field(ge=BMI_RANGE[0], le=BMI_RANGE[1], description="body-mass index in kg/m²")
     group: str | None = None
-    waist_m: float | None = Field(default=None, ge=0.4, le=2.0)
-    hip_m: float | None = Field(default=None, ge=0.5, le=2.0)
-    chest_m: float | None = Field(default=None, ge=0.5, le=2.0)
-    body_fat_pct: float | None = Field(default=None, ge=0.0, le=70.0)
+    waist_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["waist_m"][0], le=GIRTH_RANGES_M["waist_m"][1])
+    hip_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["hip_m"][0], le=GIRTH_RANGES_M["hip_m"][1])
+    chest_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["chest_m"][0], le=GIRTH_RANGES_M["chest_m"][1])
+    body_fat_pct: float | None = Field(default=None, ge=BODY_FAT_RANGE_PCT[0], le=BODY_FAT_RANGE_PCT[1])
     practice_only: bool = False
 
     @field_validator("id", "label")
@@ -95,10 +107,63 @@ class Factor(Strict):
             unknown = sorted(set(where) - set(self.levels))
             if unknown:
                 raise ValueError(f"{unknown} are not levels of {self.name} (levels: {self.levels})")
+        for level, settings in self.level_settings.items():
+            for key, value in settings.items():
+                _check_level_setting(self, level, key, value)
+        if self.maps_to == "strength":
+            _check_strength_levels(self)
         return self
 
     def abbreviation(self, level: str) -> str:
         return self.abbreviations.get(level, level)
+
+
+def _check_level_setting(factor: "Factor", level: str, key: str, value) -> None:
+    """One ``level_settings`` entry, checked as the renderer will read it (a typo fails here, not
+    half-way through a render)."""
+    where = f"level_settings.{level}.{key}"
+    if key not in LEVEL_SETTINGS:
+        raise ValueError(f"{where}: unknown setting (known: {', '.join(LEVEL_SETTINGS)})")
+    owners = LEVEL_SETTINGS[key]
+    if owners is not None and factor.maps_to not in owners:
+        raise ValueError(f"{where}: only read for a factor with maps_to: {' or '.join(owners)} ({factor.name} "
+                         f"maps to {factor.maps_to})")
+    if key == "view_deg":
+        if isinstance(value, str) or not -360.0 <= value <= 360.0:
+            raise ValueError(f"{where}: expected a view angle in degrees between -360 and 360, got {value!r}")
+    elif key == "base_scale":
+        if isinstance(value, str) or not value > 0:
+            raise ValueError(f"{where}: expected a number > 0, got {value!r}")
+    elif key == "motion" and factor.maps_to == "method":
+        if value not in METHOD_MOTIONS:
+            raise ValueError(f"{where}: expected one of {', '.join(METHOD_MOTIONS)}, got {value!r}")
+    elif key == "motion":
+        if not isinstance(value, str) or not (value in SOURCE_MOTIONS or value.startswith("bvh:")
+                                              and value[4:].strip()):
+            raise ValueError(f"{where}: expected one of {', '.join(SOURCE_MOTIONS)} or bvh:<path>, got {value!r}")
+    elif key == "modifies":
+        from stimuli.motion.modifier import TABLE_4_1
+
+        names = [n.strip() for n in str(value).split("+")]
+        unknown = [n for n in names if n not in TABLE_4_1]
+        if unknown:
+            raise ValueError(f"{where}: unknown Table 4-1 row(s) {unknown}; expected names joined by '+' from: "
+                             f"{', '.join(TABLE_4_1)}")
+
+
+def _check_strength_levels(factor: "Factor") -> None:
+    """A strength level is a body-fat % within Table 4-1's columns."""
+    from stimuli.motion.modifier import STRENGTH_BODY_FAT
+
+    low, high = STRENGTH_BODY_FAT[0], STRENGTH_BODY_FAT[-1]
+    for level in factor.levels:
+        try:
+            ok = low <= float(level) <= high
+        except ValueError:
+            ok = False
+        if not ok:
+            raise ValueError(f"levels: {factor.name} maps to strength, so level {level!r} must be a body-fat % "
+                             f"between {low:g} and {high:g}")
 
 
 class GaitSpec(Strict):
@@ -122,6 +187,13 @@ class ClipSettings(Strict):
     camera: Camera = Camera()
     background: str = "#ffffff"
     loop: bool = True
+
+    @field_validator("background")
+    @classmethod
+    def _colour(cls, value: str) -> str:
+        if not HEX_COLOUR.match(value.strip()):
+            raise ValueError(f"expected a colour like '#ffffff' (#rrggbb), got {value!r}")
+        return value
 
 
 class Display(Strict):
@@ -331,6 +403,12 @@ def _check_screen_mapping(p: Protocol) -> None:
             bad = sorted(set(f.levels) - {"F", "M"})
             if bad:
                 raise ValueError(f"factors.{f.name}: sex levels must be F or M, got {bad}")
+        if f.maps_to == "parameter" and p.factor_mapped_to("strength") is not None:
+            # The renderer exaggerates, per parameter level, the Table 4-1 rows its setting names.
+            bare = [level for level in f.levels if not f.level_settings.get(level, {}).get("modifies")]
+            if bare:
+                raise ValueError(f"factors.{f.name}: levels {bare} need level_settings.<level>.modifies: Table "
+                                 "4-1 rows joined by '+' (e.g. \"arm_abduction+arm_bob\")")
         if f.maps_to == "gait":
             missing = sorted(set(f.levels) - set(p.gaits))
             if missing:
@@ -346,17 +424,60 @@ def load_protocol(path: str | Path) -> Protocol:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise StimuliError(f"{path}: protocol file not found") from None
-    except (UnicodeDecodeError, IsADirectoryError) as exc:
+    except IsADirectoryError:
+        raise StimuliError(f"{path}: is a folder; expected a protocol YAML file") from None
+    except UnicodeDecodeError as exc:
         raise StimuliError(f"{path}: cannot read the protocol as UTF-8 text ({exc})") from None
     protocol = parse_protocol(text, source=str(path))
     protocol._folder = path.resolve().parent
     return protocol
 
 
+def check_capture_files(protocol: Protocol, path: str | Path) -> None:
+    """``motion: "bvh:<path>"`` settings must name files that exist (relative to the protocol's folder).
+
+    Run by ``validate``; loading does not require them, so that a protocol can be prepared (and its
+    design written) before the captures are in place. The render names a missing one too.
+    """
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    for f in protocol.factors:
+        for level, settings in f.level_settings.items():
+            spec = settings.get("motion")
+            if not isinstance(spec, str) or not spec.startswith("bvh:"):
+                continue
+            capture = Path(spec[4:].strip()).expanduser()
+            capture = capture if capture.is_absolute() else protocol.folder / capture
+            if not capture.is_file():
+                index = protocol.factors.index(f)
+                line = _line_of(yaml.compose(text), ["factors", index, "level_settings", level, "motion"])
+                where = f" (line {line})" if line else ""
+                raise StimuliError(f"{path}: invalid protocol: factors.{index}.level_settings.{level}.motion{where}: "
+                                   f"{capture} not found (a BVH capture; relative paths start from the protocol's "
+                                   f"folder)")
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping: YAML itself keeps the last
+    one, so a second ``participants:`` line would silently override the first."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict = {}
+        for key_node, _ in node.value:
+            if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
+                key = key_node.value
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"key {key!r} appears twice in one mapping (first on line {seen[key]})",
+                        key_node.start_mark)
+                seen[key] = key_node.start_mark.line + 1
+        return super().construct_mapping(node, deep=deep)
+
+
 def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
     try:
-        data = yaml.safe_load(text)
-        root = yaml.compose(text)
+        data = yaml.load(text, Loader=UniqueKeyLoader)
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""

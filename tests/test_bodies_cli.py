@@ -87,8 +87,10 @@ def test_single_body(tmp_path, run_cli):
 
 @pytest.mark.parametrize("args, message", [
     (["--height", "1.6", "--bmi", "28", "--out", "x.ply"], "--sex"),
-    (["--sex", "F", "--height", "1.6", "--bmi", "80", "--out", "x.ply"], "out of reach"),
-    (["--sex", "M", "--height", "3.0", "--bmi", "25", "--out", "x.ply"], "nearest body"),
+    (["--sex", "F", "--height", "1.6", "--bmi", "58", "--out", "x.ply"], "out of reach"),
+    (["--sex", "M", "--height", "1.2", "--bmi", "25", "--out", "x.ply"], "nearest body"),
+    (["--sex", "F", "--height", "1.6", "--bmi", "80", "--out", "x.ply"], "outside the human range 13–60"),
+    (["--sex", "M", "--height", "3.0", "--bmi", "25", "--out", "x.ply"], "outside the human range 1.2–2.3 m"),
     (["--sex", "F", "--height", "1.6", "--bmi", "28", "--out", "x.ply", "--backend", "smpl-y"], "backend"),
     (["--sex", "Q", "--height", "1.6", "--bmi", "28", "--out", "x.ply"], "sex must be"),
     (["--sex", "F", "--height", "1.6", "--bmi", "28", "--out", "x.txt"], "mesh file"),

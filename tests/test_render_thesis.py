@@ -166,21 +166,21 @@ def test_spinal_erectness_leans_the_trunk_back(protocol_path):
 
 
 def test_parameter_level_without_modifies_is_a_named_error(protocol_path, tmp_path):
+    """A PARAMETER level without ``modifies`` or with an unknown Table 4-1 row is refused when the
+    protocol is loaded (``validate``), not only when its clip is rendered."""
     from stimuli.protocol import load_protocol
-    from stimuli.render.settings import look_for
-    from stimuli.render.sources import protocol_figures
 
-    data = yaml.safe_load(protocol_path("thesis_pointlight").read_text())
-    data["factors"][0]["level_settings"]["arm_swing"] = {"view_deg": 90}
-    data["factors"][0]["level_settings"]["arm_abduction"]["modifies"] = "arm_abduction+belly"
-    (tmp_path / "p.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-    protocol = load_protocol(tmp_path / "p.yaml")
-    for part, expected in (("arm_swing-", "level_settings.arm_swing needs 'modifies'"),
-                           ("arm_abduction-", "unknown Table 4-1 parameter(s) ['belly']")):
-        stimulus = _stimulus(protocol, part)
-        with pytest.raises(StimuliError, match=expected.replace("(", r"\(").replace(")", r"\)")
-                           .replace("[", r"\[").replace("]", r"\]")):
-            protocol_figures(protocol, stimulus, look_for(protocol, stimulus, "160x90", 5))
+    for level, setting, expected in (("arm_swing", {"view_deg": 90}, "arm_swing"),
+                                     ("arm_abduction", None, "belly")):
+        data = yaml.safe_load(protocol_path("thesis_pointlight").read_text())
+        settings = data["factors"][0]["level_settings"]
+        if setting is None:
+            settings[level]["modifies"] = "arm_abduction+belly"
+        else:
+            settings[level] = setting
+        (tmp_path / "p.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+        with pytest.raises(StimuliError, match=expected):
+            load_protocol(tmp_path / "p.yaml")
 
 
 # -- validation --------------------------------------------------------------------------------

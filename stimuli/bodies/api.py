@@ -39,6 +39,26 @@ def _check_number(name: str, value, low: float, high: float) -> float:
     return value
 
 
+def _check_girth(name: str, value) -> float:
+    """A girth within the protocol's human range: the fitter treats girths as soft targets, so one
+    far outside it would be missed without an error. (Height and BMI keep wide sanity limits here:
+    a target out of the model's reach is reported by BodyFitError with the nearest body.)"""
+    from stimuli.protocol import GIRTH_RANGES_M
+
+    low, high = GIRTH_RANGES_M[name]
+    value = _check_number(name, value, -math.inf, math.inf)
+    if not low <= value <= high:
+        raise StimuliError(f"{name} = {value} m is not a human girth (expected {low}–{high} m)")
+    return value
+
+
+def girth_errors(body: Body) -> dict[str, float]:
+    """Measured minus target girth (m) for each girth target of ``body``."""
+    measured = body.anthropometry.as_dict()
+    return {k: float(measured[k] - v) for k, v in body.targets.items()
+            if k in ("waist_m", "hip_m", "chest_m") and v is not None}
+
+
 BACKENDS = ("anny", "smplx")
 
 
@@ -72,9 +92,9 @@ def fit_body(sex, height_m, bmi, *, waist_m=None, hip_m=None, chest_m=None, age_
     targets = Targets(
         sex=normalise_sex(sex), height_m=_check_number("height_m", height_m, 0.0, 10.0),
         bmi=_check_number("bmi", bmi, 0.0, 1000.0),
-        waist_m=None if waist_m is None else _check_number("waist_m", waist_m, 0.0, 10.0),
-        hip_m=None if hip_m is None else _check_number("hip_m", hip_m, 0.0, 10.0),
-        chest_m=None if chest_m is None else _check_number("chest_m", chest_m, 0.0, 10.0),
+        waist_m=None if waist_m is None else _check_girth("waist_m", waist_m),
+        hip_m=None if hip_m is None else _check_girth("hip_m", hip_m),
+        chest_m=None if chest_m is None else _check_girth("chest_m", chest_m),
         age_years=_check_number("age_years", age_years, 17.9, 90.1),
     )
     body_id = body_id or f"{targets.sex}_h{targets.height_m * 100:.0f}_b{targets.bmi:.1f}"

@@ -7,7 +7,10 @@ import json
 from pathlib import Path
 
 from stimuli.errors import StimuliError
+from stimuli.fileio import check_output_dir, check_output_file
 
+MESH_SUFFIXES = (".ply", ".obj", ".glb", ".stl")
+GIRTH_TOLERANCE_M = 0.02  # a girth target missed by more is reported, not passed off as reached
 
 
 def register(subparsers) -> None:
@@ -45,6 +48,17 @@ def run_bodies(args: argparse.Namespace) -> int:
     if args.protocol is not None:
         if any(v is not None for v in single):
             raise StimuliError("give either a PROTOCOL or --sex/--height/--bmi, not both")
+        # The protocol gives each actor's girths, and writes the per-body facts as CSV files.
+        unused = [name for name, v in (("--waist", args.waist), ("--hip", args.hip), ("--chest", args.chest),
+                                       ("--json", args.json)) if v is not None]
+        if unused:
+            raise StimuliError(f"{', '.join(unused)}: only for a single body (--sex/--height/--bmi); a protocol "
+                               "takes girths from its actors and writes bodies.csv, anthropometry.csv and "
+                               "segments.csv")
+        if args.out.suffix.lower() in MESH_SUFFIXES:
+            raise StimuliError(f"--out {args.out}: a protocol's bodies go into a folder (bodies.csv, meshes/…); "
+                               "give a folder name, not a mesh file")
+        check_output_dir(args.out)
         return _run_protocol(args)
     missing = [name for name, v in zip(("--sex", "--height", "--bmi"), single) if v is None]
     if missing:
@@ -70,9 +84,14 @@ def _run_protocol(args) -> int:
 
 def _run_single(args) -> int:
     from stimuli.bodies import fit_body
+    from stimuli.bodies.api import girth_errors
+    from stimuli.commands.checks import human_body
 
-    if args.out.suffix.lower() not in (".ply", ".obj", ".glb", ".stl"):
+    if args.out.suffix.lower() not in MESH_SUFFIXES:
         raise StimuliError(f"--out {args.out}: a single body is written as a mesh file (.ply, .obj, .glb or .stl)")
+    check_output_file(args.out)
+    check_output_file(args.json, "--json")
+    human_body(args.height, args.bmi)
     body = fit_body(args.sex, args.height, args.bmi, waist_m=args.waist, hip_m=args.hip, chest_m=args.chest,
                     on_unreachable="nearest" if args.allow_nearest else "raise", backend_name=args.backend,
                     smplx_dir=args.smplx_dir)
@@ -86,13 +105,19 @@ def _run_single(args) -> int:
           f" hip {a.hip_m:.3f} m, chest {a.chest_m:.3f} m -> {args.out}")
     if not body.fit.reachable:
         print(f"warning: {body.fit.message}")
+    errors = girth_errors(body)
+    missed = {k: e for k, e in errors.items() if abs(e) > GIRTH_TOLERANCE_M}
+    for name, error in missed.items():  # girths are soft targets: say when one is missed
+        print(f"warning: {name} target {body.targets[name]:.3f} m missed by {error * 100:+.1f} cm (the body model "
+              f"cannot reach it at this height and BMI; tolerance ±{GIRTH_TOLERANCE_M * 100:.0f} cm)")
     if args.json:
         from stimuli.fileio import atomic_write_text
 
         report = {"body_id": body.body_id, "sex": body.sex, "targets": body.targets, "phenotype": body.phenotype,
                   "anthropometry": body.anthropometry.as_dict(), "fit": {
-                      "reachable": body.fit.reachable, "height_error_m": body.fit.height_error_m,
-                      "bmi_error": body.fit.bmi_error},
+                      "reachable": body.fit.reachable and not missed, "height_error_m": body.fit.height_error_m,
+                      "bmi_error": body.fit.bmi_error, "girth_errors_m": errors,
+                      "girths_reached": not missed},
                   "segments": [s.as_row() for s in body.segments]}
         atomic_write_text(args.json, json.dumps(report, indent=2, sort_keys=True) + "\n")
     return 0

@@ -6,7 +6,12 @@ import argparse
 import json
 from pathlib import Path
 
+from stimuli.commands.checks import at_least, human_body, in_range, positive
 from stimuli.errors import StimuliError
+from stimuli.fileio import check_output_dir, check_output_file
+
+
+STRIP_SUFFIXES = (".png", ".svg", ".pdf", ".jpg")
 
 
 def register(subparsers) -> None:
@@ -18,11 +23,11 @@ def register(subparsers) -> None:
     p.add_argument("--gait", choices=["walk", "jog"], default="walk")
     p.add_argument("--cadence", type=float, default=None, help="steps/min (default: protocol or 112/138)")
     p.add_argument("--speed", type=float, default=None, help="m/s (default: protocol or 1.2/2.2)")
-    p.add_argument("--height", type=float, default=1.75, help="body height in m")
+    p.add_argument("--height", type=float, default=None, help="body height in m (default 1.75)")
     p.add_argument("--bmi", type=float, default=None, help="BMI: applies the anthropometric gait trends")
-    p.add_argument("--sex", choices=["F", "M"], default="M")
+    p.add_argument("--sex", choices=["F", "M"], default=None, help="default M")
     p.add_argument("--protocol", type=Path, help="take the actor, cadence, speed and seed from a protocol")
-    p.add_argument("--actor", help="actor id in the protocol (e.g. F_Hi1)")
+    p.add_argument("--actor", help="actor id in the protocol (e.g. F_Hi1); needed with --protocol")
     p.add_argument("--seed", type=int, default=None, help="style seed (default: protocol seed or 0)")
     p.add_argument("--no-style", action="store_true", help="no individual style, trends only")
     p.add_argument("--fps", type=float, default=30.0)
@@ -95,9 +100,12 @@ def parse_body(spec: str) -> dict:
     """``sex=M,height=1.80,bmi=25`` → {"sex": "M", "height_m": 1.8, "bmi": 25.0}."""
     out = {}
     for part in spec.split(","):
-        if "=" not in part:
-            raise StimuliError(f"--body {spec!r}: expected key=value pairs like sex=M,height=1.80,bmi=25")
+        if part.count("=") != 1:  # "sex=M;height=1.8" is one part with two '='
+            raise StimuliError(f"--body {spec!r}: expected comma-separated key=value pairs like "
+                               "sex=M,height=1.80,bmi=25")
         k, v = (x.strip() for x in part.split("=", 1))
+        if {"sex": "sex", "height": "height_m", "bmi": "bmi"}.get(k) in out:
+            raise StimuliError(f"--body {spec!r}: {k} is given twice")
         if k == "sex":
             out["sex"] = v.upper()
         elif k in ("height", "bmi"):
@@ -110,6 +118,7 @@ def parse_body(spec: str) -> dict:
     missing = {"sex", "height_m", "bmi"} - set(out)
     if missing:
         raise StimuliError(f"--body {spec!r}: missing {', '.join(sorted(missing))}")
+    human_body(out["height_m"], out["bmi"], "--body height", "--body bmi")
     return out
 
 
@@ -123,6 +132,8 @@ def _fit(spec: str):
 def _load(path: Path):
     from stimuli.motion import Motion
 
+    if path.is_dir():
+        raise StimuliError(f"{path}: is a folder, not a motion file")
     if not path.is_file():
         raise StimuliError(f"{path}: motion file not found")
     if path.suffix.lower() == ".bvh":
@@ -136,9 +147,10 @@ def run_generate(args: argparse.Namespace) -> int:
     from stimuli.motion.generate import generate
     from stimuli.motion.style import params_for_actor
 
+    _check_generate(args)
     defaults = {"walk": (112.0, 1.2), "jog": (138.0, 2.2)}
     cadence, speed = defaults[args.gait]
-    height, bmi, sex, actor_id, seed, extra = args.height, args.bmi, args.sex, "cli", args.seed or 0, {}
+    height, bmi, sex, actor_id, seed, extra = args.height or 1.75, args.bmi, args.sex or "M", "cli", args.seed or 0, {}
     if args.protocol:
         from stimuli.protocol import load_protocol
         proto = load_protocol(args.protocol)
@@ -147,16 +159,15 @@ def run_generate(args: argparse.Namespace) -> int:
             raise StimuliError(f"{args.protocol}: no gait {args.gait!r} in gaits ({', '.join(proto.gaits)})")
         cadence, speed = gait.cadence_spm, gait.speed_mps
         seed = proto.seed if args.seed is None else args.seed
-        if args.actor:
-            found = [a for a in proto.actors if a.id == args.actor]
-            if not found:
-                raise StimuliError(f"{args.protocol}: no actor {args.actor!r}; actors are "
-                                   f"{', '.join(a.id for a in proto.actors)}")
-            a = found[0]
-            height, bmi, sex, actor_id = a.height_m, a.bmi, a.sex, a.id
-            extra = {k: getattr(a, k) for k in ("waist_m", "hip_m", "chest_m", "body_fat_pct") if getattr(a, k, None)}
-    cadence = args.cadence or cadence
-    speed = args.speed or speed
+        found = [a for a in proto.actors if a.id == args.actor]
+        if not found:
+            raise StimuliError(f"{args.protocol}: no actor {args.actor!r}; actors are "
+                               f"{', '.join(a.id for a in proto.actors)}")
+        a = found[0]
+        height, bmi, sex, actor_id = a.height_m, a.bmi, a.sex, a.id
+        extra = {k: getattr(a, k) for k in ("waist_m", "hip_m", "chest_m", "body_fat_pct") if getattr(a, k, None)}
+    cadence = args.cadence if args.cadence is not None else cadence
+    speed = args.speed if args.speed is not None else speed
     params = params_for_actor(actor_id, height, bmi if bmi is not None else 22.0, sex, args.gait, cadence, speed,
                               seed=seed, style=not args.no_style, **extra)
     m = generate(params, height, fps=args.fps, cycles=args.cycles)
@@ -167,10 +178,47 @@ def run_generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_generate(args: argparse.Namespace) -> None:
+    """Options of ``motion generate``: numbers in range, and the body from the options or from
+    --protocol/--actor, never a mix of both (one of them would be silently ignored)."""
+    _check_npz_out(args.out)
+    check_output_file(args.bvh, "--bvh")
+    positive("--cadence", args.cadence, "steps per minute > 0")
+    positive("--speed", args.speed, "a belt speed > 0 m/s")
+    positive("--fps", args.fps, "a frame rate > 0")
+    at_least("--cycles", args.cycles, 1)
+    at_least("--seed", args.seed, 0)
+    if args.protocol is None:
+        if args.actor:
+            raise StimuliError(f"--actor {args.actor}: needs --protocol (the file that declares the actor)")
+        human_body(args.height, args.bmi)
+        return
+    if not args.actor:
+        raise StimuliError(f"--protocol {args.protocol}: also give --actor (an actor id of the protocol) to say "
+                           "whose body and gait to make")
+    given = [o for o, v in (("--height", args.height), ("--bmi", args.bmi), ("--sex", args.sex)) if v is not None]
+    if given:
+        raise StimuliError(f"{', '.join(given)}: the body comes from --actor {args.actor} of the protocol; give "
+                           "either --protocol/--actor or --height/--bmi/--sex, not both")
+
+
+def _check_npz_out(path: Path, option: str = "--out") -> None:
+    """A motion is written as ``.npz`` (DESIGN.md contract); a file there must be writable."""
+    if path.suffix.lower() != ".npz":
+        raise StimuliError(f"{option} {path}: a motion is written as .npz (use 'motion export-bvh' for BVH)")
+    check_output_file(path, option)
+
+
 def run_import(args: argparse.Namespace) -> int:
     from stimuli.motion.loop import make_loop
 
     src = args.source
+    _check_npz_out(args.out)
+    positive("--fps", args.fps, "a frame rate > 0")
+    in_range("--height", args.height, _height_range(), "m")
+    at_least("--cycles", args.cycles, 1)
+    if args.cycles is not None and not args.loop:
+        raise StimuliError("--cycles: only used with --loop (the whole cycles kept in the loop)")
     if src.suffix.lower() == ".bvh":
         from stimuli.motion.bvh import read_bvh
         m = read_bvh(src, mapping=args.mapping, height_m=args.height)
@@ -181,7 +229,7 @@ def run_import(args: argparse.Namespace) -> int:
         raise StimuliError(f"{src}: unknown motion format (expected .bvh or an AMASS .npz)")
     if args.loop:
         m = make_loop(m, cycles=args.cycles)
-    if args.fps:
+    if args.fps is not None:
         looped = m.metadata.get("looped")
         m = m.resample(args.fps)
         m.metadata["looped"] = bool(looped)
@@ -189,17 +237,37 @@ def run_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def _height_range() -> tuple[float, float]:
+    from stimuli.protocol import HEIGHT_RANGE_M
+
+    return HEIGHT_RANGE_M
+
+
 def run_average(args: argparse.Namespace) -> int:
     from stimuli.motion.average import average_motion
 
-    avg = average_motion([_load(p) for p in args.motions], cycles=args.cycles)
+    _check_npz_out(args.out)
+    at_least("--cycles", args.cycles, 1)
+    motions = [_load(p) for p in args.motions]
+    gaits = {str(p): m.metadata["gait"] for p, m in zip(args.motions, motions) if m.metadata.get("gait")}
+    if len(set(gaits.values())) > 1:  # an average of a walk and a jog is neither
+        raise StimuliError("average: the motions have different gaits ("
+                           + ", ".join(f"{p}: {g}" for p, g in gaits.items()) + "); average one gait at a time")
+    avg = average_motion(motions, cycles=args.cycles)
     print(avg.save(args.out))
     return 0
 
 
 def run_modify(args: argparse.Namespace) -> int:
     from stimuli.motion.modifier import modify
+    from stimuli.protocol import BODY_FAT_RANGE_PCT
 
+    _check_npz_out(args.out)
+    in_range("--height", args.height, _height_range(), "m")
+    in_range("--body-fat", args.body_fat, BODY_FAT_RANGE_PCT, "%")
+    positive("--chest", args.chest, "a chest girth > 0 m")
+    positive("--wthr", args.wthr, "a waist-to-hip ratio > 0")
+    positive("--base-scale", args.base_scale, "a factor > 0")
     m = modify(_load(args.motion), args.height, args.body_fat, args.chest, args.wthr, base_scale=args.base_scale)
     print(json.dumps(m.metadata["modifier"], indent=2))
     print(m.save(args.out))
@@ -209,19 +277,42 @@ def run_modify(args: argparse.Namespace) -> int:
 def run_metrics(args: argparse.Namespace) -> int:
     from stimuli.motion.quality import motion_quality
 
+    check_output_file(args.json, "--json")
     m = _load(args.motion)
-    q = motion_quality(m, _fit(args.body) if args.body else None)
-    text = json.dumps(q, indent=2, sort_keys=True)
+    body = _fit(args.body) if args.body else None
+    if body is not None and list(m.joint_names) != list(body.rig.names):
+        raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its "
+                           f"rig; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
+                           "--out R.npz")
+    q = motion_quality(m, body)
+    # NaN (a figure with no value, e.g. no foot contact) is not JSON: write null.
+    text = json.dumps(_finite_or_none(q), indent=2, sort_keys=True)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text + "\n")
+        from stimuli.fileio import atomic_write_text
+
+        atomic_write_text(args.json, text + "\n")
     print(text)
     return 0
+
+
+def _finite_or_none(value):
+    """``value`` with every NaN or infinite float (in nested dicts and lists) replaced by None."""
+    import math
+
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def run_export(args: argparse.Namespace) -> int:
     from stimuli.motion.bvh import write_bvh
 
+    check_output_file(args.out)
+    positive("--scale", args.scale, "a length multiplier > 0")
     print(write_bvh(_load(args.motion), args.out, order=args.order, scale=args.scale))
     return 0
 
@@ -229,6 +320,7 @@ def run_export(args: argparse.Namespace) -> int:
 def run_retarget(args: argparse.Namespace) -> int:
     from stimuli.motion.retarget import retarget
 
+    _check_npz_out(args.out)
     print(retarget(_load(args.motion), _fit(args.body), keep_speed=args.keep_speed).save(args.out))
     return 0
 
@@ -236,6 +328,7 @@ def run_retarget(args: argparse.Namespace) -> int:
 def run_markers(args: argparse.Namespace) -> int:
     from stimuli.motion.markers import write_markers_csv
 
+    check_output_file(args.out)
     print(write_markers_csv(_load(args.motion), args.out))
     return 0
 
@@ -243,12 +336,27 @@ def run_markers(args: argparse.Namespace) -> int:
 def run_strip(args: argparse.Namespace) -> int:
     from stimuli.motion.strip import frame_strip
 
+    at_least("--frames", args.frames, 1)
     if args.protocol:
         from stimuli.motion.strip import protocol_strips
-        for path in protocol_strips(args.protocol, args.out, args.frames, on_bodies=not args.skeleton_only):
+        if args.motions:
+            raise StimuliError(f"motion strip: give motion files or --protocol, not both (got {args.motions[0]} "
+                               f"and --protocol {args.protocol})")
+        check_output_dir(args.out)
+        written = protocol_strips(args.protocol, args.out, args.frames, on_bodies=not args.skeleton_only)
+        if not written:
+            raise StimuliError(f"{args.protocol}: declares no gaits, so there is no generated walk or jog to "
+                               "draw; give motion files instead")
+        for path in written:
             print(path)
         return 0
     if not args.motions:
         raise StimuliError("motion strip: give motion files or --protocol")
+    if args.skeleton_only:
+        raise StimuliError("--skeleton-only: only with --protocol (motion files are drawn as they are)")
+    if args.out.suffix.lower() not in STRIP_SUFFIXES:
+        raise StimuliError(f"--out {args.out}: a strip is an image; expected a file ending in "
+                           f"{', '.join(STRIP_SUFFIXES)}")
+    check_output_file(args.out)
     print(frame_strip({p.stem: _load(p) for p in args.motions}, args.out, n=args.frames))
     return 0

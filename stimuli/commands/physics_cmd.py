@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from stimuli.commands.checks import in_range
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("physics", help="COM method: physics-based retargeting in MuJoCo",
@@ -47,11 +49,26 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
+def _check_retarget_options(args: argparse.Namespace) -> None:
+    """Heights in range and both output files writable, before the (minutes-long) simulation (weights:
+    ``check_weight``)."""
+    from stimuli.errors import StimuliError
+    from stimuli.fileio import check_output_file
+    from stimuli.protocol import HEIGHT_RANGE_M
+
+    in_range("--height", args.height, HEIGHT_RANGE_M, "m (metres, not centimetres)")
+    in_range("--reference-height", args.reference_height, HEIGHT_RANGE_M, "m (metres, not centimetres)")
+    if args.out.suffix.lower() != ".npz":
+        raise StimuliError(f"--out {args.out}: the COM motion is written as .npz")
+    check_output_file(args.out)
+    check_output_file(args.report, "--report")
+
+
 def _reference(args, motion) -> tuple[float, float]:
     """Height (m) and weight (kg) of the motion's own body."""
     meta = motion.metadata
     height = args.reference_height or meta.get("height_m") or args.height
-    if args.reference_weight:
+    if args.reference_weight is not None:
         weight = args.reference_weight
     elif "weight_kg" in meta:
         weight = meta["weight_kg"]
@@ -69,10 +86,13 @@ def run_retarget(args: argparse.Namespace) -> int:
     from stimuli.physics.controller import Gains, motion_gait
     from stimuli.physics.inertia import check_weight
     from stimuli.physics.retarget import RagdollFellError, retarget
+    from stimuli.protocol import HEIGHT_RANGE_M
 
+    _check_retarget_options(args)
     check_weight(args.weight, args.height, where="--weight")
     motion = Motion.load(args.motion)
     ref_h, ref_w = _reference(args, motion)
+    in_range("--reference-height", ref_h, HEIGHT_RANGE_M, "m (the motion's own body, in metres)")
     check_weight(ref_w, ref_h, where="--reference-weight")
     body = fit_body(args.sex, args.height, args.weight / args.height**2)
     ref_body = fit_body(args.sex, ref_h, ref_w / ref_h**2)
@@ -93,8 +113,9 @@ def run_retarget(args: argparse.Namespace) -> int:
 
 
 def _write_report(path: Path, report: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+    from stimuli.fileio import atomic_write_text
+
+    atomic_write_text(path, json.dumps(report, indent=1, sort_keys=True) + "\n")
 
 
 def run_protocol(args: argparse.Namespace) -> int:

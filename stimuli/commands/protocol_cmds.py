@@ -29,9 +29,10 @@ def register(subparsers) -> None:
 
 def run_validate(args: argparse.Namespace) -> int:
     from stimuli.design import build_design
-    from stimuli.protocol import load_protocol
+    from stimuli.protocol import check_capture_files, load_protocol
 
     protocol = load_protocol(args.protocol)
+    check_capture_files(protocol, args.protocol)
     design = build_design(protocol)
     print(f"{args.protocol}: valid protocol '{protocol.name}'")
     for f in protocol.factors:
@@ -46,8 +47,10 @@ def run_validate(args: argparse.Namespace) -> int:
 
 def run_design(args: argparse.Namespace) -> int:
     from stimuli.design import build_design, write_design
+    from stimuli.fileio import check_output_dir
     from stimuli.protocol import load_protocol
 
+    check_output_dir(args.out)
     design = build_design(load_protocol(args.protocol), args.participants, args.seed)
     for path in write_design(design, args.out):
         print(path)

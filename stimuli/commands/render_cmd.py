@@ -55,6 +55,7 @@ def run_render(args: argparse.Namespace) -> int:
     from stimuli.render.pipeline import render_protocol
 
     if args.verify:
+        _check_manifest_present(args.out)
         problems = verify_manifest(args.out)
         for line in problems:
             print(line)
@@ -64,6 +65,7 @@ def run_render(args: argparse.Namespace) -> int:
         return 0
     if args.protocol is None:
         raise StimuliError("render: a PROTOCOL file is needed (only --verify works without one)")
+    _check_render_options(args)
     report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps, limit=args.limit,
                              only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
                              source=args.poses, motions_dir=args.motions)
@@ -72,6 +74,52 @@ def run_render(args: argparse.Namespace) -> int:
         for line in survey_for_render_folder(args.protocol, args.out, report, args.video_base_url):
             print(line)
     return 0
+
+
+def _check_manifest_present(out_dir: Path) -> None:
+    """--verify checks a finished render: a folder without clips in its manifest is not one."""
+    from stimuli.errors import StimuliError
+    from stimuli.render.manifest import MANIFEST, read_manifest
+
+    if not (out_dir / MANIFEST).is_file():
+        raise StimuliError(f"{out_dir}/{MANIFEST}: not found; --verify checks the clips of a folder written by "
+                           "'shapemotion render'")
+    if not read_manifest(out_dir):
+        raise StimuliError(f"{out_dir}/{MANIFEST}: lists no clips, so there is nothing to verify")
+
+
+def _check_render_options(args: argparse.Namespace) -> None:
+    """Numbers in range, --motions only where the protocol reads it, the output folder usable;
+    all before the first clip is rendered."""
+    from stimuli.commands.checks import at_least, positive
+    from stimuli.errors import StimuliError
+    from stimuli.fileio import check_output_dir
+    from stimuli.protocol import load_protocol
+
+    positive("--fps", args.fps, "a frame rate > 0")
+    at_least("--workers", args.workers, 1)
+    at_least("--limit", args.limit, 1)
+    check_video_base_url(args.video_base_url)
+    check_output_dir(args.out)
+    if args.motions is None:
+        return
+    protocol = load_protocol(args.protocol)
+    alternatives = protocol.factors_with_role("alternatives")
+    if not alternatives or alternatives[0].maps_to != "method":
+        raise StimuliError(f"--motions {args.motions}: {args.protocol} has no METHOD factor (maps_to: method), so "
+                           "it reads no motions of 'shapemotion physics protocol'; leave --motions out")
+    if not args.motions.is_dir():
+        raise StimuliError(f"--motions {args.motions}: folder not found (the --out folder of 'shapemotion physics "
+                           "protocol')")
+
+
+def check_video_base_url(url: str | None) -> None:
+    """The survey exports include Qualtrics files, whose clips need absolute http(s) addresses."""
+    from stimuli.errors import StimuliError
+
+    if url is not None and (not url.startswith(("http://", "https://")) or any(c.isspace() for c in url)):
+        raise StimuliError(f"--video-base-url {url!r}: expected an absolute address without spaces starting with "
+                           "http:// or https:// (the Qualtrics exports load the clips from it)")
 
 
 def survey_for_render_folder(protocol_path, out_dir, report, video_base_url=None) -> list[str]:

@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 
 FORMATS = ("qsf", "qualtrics-txt", "jspsych", "psychopy")
+FILE_FORMATS = ("qsf", "qualtrics-txt")  # the others write a folder
+URL_SCHEMES = ("http://", "https://")
 
 
 def register(subparsers) -> None:
@@ -24,8 +26,14 @@ def register(subparsers) -> None:
 
 
 def run_survey(args: argparse.Namespace) -> int:
+    from stimuli.fileio import check_output_dir, check_output_file
     from stimuli.survey import export_survey
 
+    check_options(args)
+    if args.format in FILE_FORMATS:
+        check_output_file(args.out)
+    else:
+        check_output_dir(args.out)
     result = export_survey(args.folder, args.format, args.out, args.video_base_url, args.post_url)
     print(result.path)
     for note in result.notes:
@@ -35,3 +43,30 @@ def run_survey(args: argparse.Namespace) -> int:
         for number, step in enumerate(result.manual_steps, start=1):
             print(f"{number}. {step}")
     return 0
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """Options a format does not use are errors, not silently dropped; URLs must fit the format.
+
+    Qualtrics hosts the survey itself, so its clips need absolute http(s) addresses; a jsPsych folder
+    may also name them relative to its own index.html.
+    """
+    from stimuli.errors import StimuliError
+
+    if args.post_url and args.format != "jspsych":
+        raise StimuliError(f"--post-url: only the jspsych format posts responses; --format {args.format} "
+                           "does not use it")
+    if any(c.isspace() for c in args.post_url):
+        raise StimuliError(f"--post-url {args.post_url!r}: expected an address without spaces")
+    url = args.video_base_url
+    if url is None:
+        return
+    if args.format == "psychopy":
+        raise StimuliError("--video-base-url: the psychopy format plays the clips from the folder; it does not "
+                           "use a URL")
+    if not url.strip() or any(c.isspace() for c in url):
+        raise StimuliError(f"--video-base-url {url!r}: expected an address without spaces, such as "
+                           "https://example.org/clips")
+    if args.format in FILE_FORMATS and not url.startswith(URL_SCHEMES):
+        raise StimuliError(f"--video-base-url {url!r}: a Qualtrics survey needs an absolute address starting "
+                           "with http:// or https://")

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from stimuli.errors import StimuliError
+from stimuli.fileio import atomic_write_text
 from stimuli.motion import quat
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import detect_roles, load_mapping
@@ -50,23 +51,67 @@ def _flatten(root) -> list[tuple[str, int, np.ndarray, list[str], object]]:
 
 
 def _read_frames(path: Path, n_channels: int) -> tuple[np.ndarray, float]:
-    """The MOTION block as a (frames × channels) array and the frame time."""
+    """The MOTION block as a (frames × channels) array and the frame time.
+
+    Every frame row must hold exactly ``n_channels`` finite numbers and there must be exactly as
+    many rows as ``Frames:`` announces: a row short by a few values would otherwise shift every
+    later channel, and extra or missing rows would be dropped or invented without a word.
+    """
     text = path.read_text(errors="replace")
     m = re.search(r"^\s*MOTION\s*$\s*Frames:\s*(\d+)\s*$\s*Frame Time:\s*([-+0-9.eE]+)\s*$", text, re.M)
     if not m:
         raise StimuliError(f"{path}: no 'MOTION / Frames: N / Frame Time: S' block")
     n_frames, frame_time = int(m.group(1)), float(m.group(2))
-    try:
-        values = np.array(text[m.end():].split(), dtype=float)
-    except ValueError as exc:
-        raise StimuliError(f"{path}: MOTION block holds a non-number ({exc})") from None
-    if n_channels == 0 or values.size < n_frames * n_channels:
-        got = values.size / max(n_channels, 1)
-        raise StimuliError(f"{path}: header announces {n_frames} frames of {n_channels} channels, "
-                           f"the file holds {got:.1f} frames")
     if frame_time <= 0:
         raise StimuliError(f"{path}: Frame Time must be > 0, got {frame_time}")
-    return values[: n_frames * n_channels].reshape(n_frames, n_channels), frame_time
+    if n_channels == 0:
+        raise StimuliError(f"{path}: the HIERARCHY declares no CHANNELS, so the frames hold nothing to read")
+    first_line = text.count("\n", 0, m.end()) + 1  # file line number of the text right after the header
+    rows = []
+    for offset, line in enumerate(text[m.end():].split("\n")):
+        if line.strip():
+            rows.append(_frame_row(path, line, first_line + offset, len(rows) + 1, n_channels))
+    if len(rows) != n_frames:
+        header_line = text.count("\n", 0, m.start(1)) + 1
+        raise StimuliError(f"{path}: header announces {n_frames} frames (line {header_line}), the file holds "
+                           f"{len(rows)} frame rows")
+    return np.array(rows), frame_time
+
+
+def _frame_row(path: Path, line: str, line_no: int, frame: int, n_channels: int) -> list[float]:
+    """One frame row as numbers: exactly ``n_channels`` finite values (StimuliError naming the line)."""
+    tokens = line.split()
+    if len(tokens) != n_channels:
+        raise StimuliError(f"{path}: line {line_no} (frame {frame}) holds {len(tokens)} values, the HIERARCHY "
+                           f"declares {n_channels} channels")
+    try:
+        values = [float(t) for t in tokens]
+    except ValueError:
+        bad = next(t for t in tokens if not _is_number(t))
+        raise StimuliError(f"{path}: line {line_no} (frame {frame}): {bad!r} is not a number") from None
+    if not all(np.isfinite(values)):
+        bad = next(t for t, v in zip(tokens, values) if not np.isfinite(v))
+        raise StimuliError(f"{path}: line {line_no} (frame {frame}): {bad!r} is not a finite number")
+    return values
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _channel_line(path: Path, joint: str) -> str:
+    """'line N' of the CHANNELS declaration of ``joint`` (for messages; '' when not found)."""
+    lines = path.read_text(errors="replace").split("\n")
+    for i, line in enumerate(lines):
+        if line.split()[:2] in (["ROOT", joint], ["JOINT", joint]):
+            for k in range(i + 1, len(lines)):
+                if lines[k].split()[:1] == ["CHANNELS"]:
+                    return f"line {k + 1}, "
+    return ""
 
 
 def _channel_rotations(frames: np.ndarray, joints: list, path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -79,15 +124,16 @@ def _channel_rotations(frames: np.ndarray, joints: list, path: Path) -> tuple[np
         order, rcols = "", []
         for ch in channels:
             c = ch.lower()
-            if c.endswith("rotation"):
+            if c in ("xrotation", "yrotation", "zrotation"):
                 order += c[0].upper()
                 rcols.append(col)
-            elif c.endswith("position"):
+            elif c in ("xposition", "yposition", "zposition"):
                 # Only the root's translation moves the body; other position channels repeat offsets.
                 if parent == -1:
                     root[:, "xyz".index(c[0])] = frames[:, col]
             else:
-                raise StimuliError(f"{path}: joint {name!r} has unknown channel {ch!r}")
+                raise StimuliError(f"{path}: {_channel_line(path, name)}joint {name!r} has unknown channel {ch!r} "
+                                   "(expected Xposition, Yposition, Zposition, Xrotation, Yrotation, Zrotation)")
             col += 1
         if len(order) == 3:
             rot[:, j] = quat.from_euler(frames[:, rcols], order)
@@ -242,6 +288,5 @@ def write_bvh(motion: Motion, path: str | Path, order: str = "ZYX", scale: float
     body = np.concatenate([motion.root_translation * scale, euler.reshape(motion.n_frames, -1)], axis=1)
     lines += ["MOTION", f"Frames: {motion.n_frames}", f"Frame Time: {1.0 / motion.fps:.8f}"]
     lines += [_fmt(row) for row in body]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n")
     return path

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -173,33 +174,69 @@ class Motion:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(
-            tmp, fps=np.float64(self.fps), joint_names=np.array(self.joint_names, dtype=str),
-            parents=self.parents.astype(np.int32), offsets=self.offsets,
-            rotations=self.rotations, root_translation=self.root_translation,
-            metadata=np.array(json.dumps(self.metadata, sort_keys=True, default=_json_default)))
-        tmp.replace(path)
+        try:
+            np.savez_compressed(
+                tmp, fps=np.float64(self.fps), joint_names=np.array(self.joint_names, dtype=str),
+                parents=self.parents.astype(np.int32), offsets=self.offsets,
+                rotations=self.rotations, root_translation=self.root_translation,
+                metadata=np.array(json.dumps(self.metadata, sort_keys=True, default=_json_default)))
+            tmp.replace(path)
+        except BaseException:  # e.g. ``path`` is a folder: leave no temporary file behind
+            tmp.unlink(missing_ok=True)
+            raise
         return path
 
     @classmethod
     def load(cls, path: str | Path) -> "Motion":
-        """Read a ``.npz`` motion (StimuliError naming the file and the missing/bad field)."""
+        """Read a ``.npz`` motion (StimuliError naming the file and the missing/bad field).
+
+        Fields beyond the contract are ignored (other tools may add their own).
+        """
         path = Path(path)
         try:
-            data = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise StimuliError(f"{path}: not a readable .npz motion ({exc})") from None
+            with np.load(path, allow_pickle=False) as data:
+                fields = {k: data[k] for k in data.files}
+        except FileNotFoundError:
+            raise StimuliError(f"{path}: motion file not found") from None
+        except IsADirectoryError:
+            raise StimuliError(f"{path}: is a folder, not a motion file") from None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            # numpy reads any file as a pickle when it is neither .npz nor .npy, hence its
+            # "pickled (object) data" message for a text file; say what the file is not instead.
+            raise StimuliError(f"{path}: not a shapemotion motion (.npz): {_load_problem(exc)}") from None
         needed = ["fps", "joint_names", "parents", "offsets", "rotations", "root_translation"]
-        missing = [k for k in needed if k not in data.files]
+        missing = [k for k in needed if k not in fields]
         if missing:
             raise StimuliError(f"{path}: missing field(s) {', '.join(missing)} (a Motion .npz needs {', '.join(needed)})")
-        meta = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
         try:
-            return cls(fps=float(data["fps"]), joint_names=list(data["joint_names"]), parents=data["parents"],
-                       offsets=data["offsets"], rotations=data["rotations"],
-                       root_translation=data["root_translation"], metadata=meta)
+            meta = json.loads(str(fields["metadata"])) if "metadata" in fields else {}
+        except json.JSONDecodeError as exc:
+            raise StimuliError(f"{path}: not a shapemotion motion (.npz): metadata is not JSON ({exc})") from None
+        if not isinstance(meta, dict):
+            raise StimuliError(f"{path}: not a shapemotion motion (.npz): metadata must be a JSON object")
+        try:
+            _check_finite_rotations(fields["rotations"])
+            return cls(fps=float(fields["fps"]), joint_names=list(fields["joint_names"]), parents=fields["parents"],
+                       offsets=fields["offsets"], rotations=fields["rotations"],
+                       root_translation=fields["root_translation"], metadata=meta)
         except StimuliError as exc:
             raise StimuliError(f"{path}: {exc}") from None
+        except (TypeError, ValueError) as exc:  # e.g. an array where fps should be a number
+            raise StimuliError(f"{path}: not a shapemotion motion (.npz): {exc}") from None
+
+def _load_problem(exc: Exception) -> str:
+    """What was wrong with a file numpy could not read, in words."""
+    if isinstance(exc, EOFError) or "pickled" in str(exc) or isinstance(exc, zipfile.BadZipFile):
+        return "the file is empty, truncated or of another kind"
+    return str(exc)
+
+
+def _check_finite_rotations(rotations) -> None:
+    """NaN quaternions would be normalised into NaN poses: name the first bad frame and joint."""
+    rot = np.asarray(rotations, dtype=float)
+    if rot.ndim == 3 and not np.all(np.isfinite(rot)):
+        frame, joint = np.argwhere(~np.isfinite(rot))[0][:2]
+        raise StimuliError(f"rotations hold NaN/inf at frame {frame} (joint {joint})")
 
 
 def _json_default(obj):

@@ -62,6 +62,26 @@ def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
     return protocol_average(protocol, sex, gait, cycles=cycles)
 
 
+def check_protocol_inputs(protocol, out: Path, motions_dir, workers: int) -> None:
+    """Every argument problem before the first folder is made: the output folder, the worker count
+    and each NoCOM file a given ``motions_dir`` must hold."""
+    from stimuli.fileio import check_output_dir
+
+    check_output_dir(out)
+    if workers < 1:
+        raise StimuliError(f"--workers: expected a whole number >= 1, got {workers}")
+    if motions_dir is None:
+        return
+    if not Path(motions_dir).is_dir():
+        raise StimuliError(f"--motions {motions_dir}: folder not found (expected <motions>/<sex>_<gait>.npz files)")
+    for gait in protocol.gaits:
+        for sex in sorted({a.sex for a in protocol.actors}):
+            path = Path(motions_dir) / f"{sex}_{gait}.npz"
+            if not path.is_file():
+                raise StimuliError(f"{path}: NoCOM average motion for sex {sex}, gait {gait} not found "
+                                   f"(expected <motions>/<sex>_<gait>.npz)")
+
+
 def _key(motion_path: Path, actor: dict, gains_text: str) -> str:
     h = hashlib.sha256()
     h.update(motion_path.read_bytes())
@@ -107,6 +127,7 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
 
     protocol = load_protocol(protocol_path)
     out = Path(out)
+    check_protocol_inputs(protocol, out, motions_dir, workers)
     (out / "nocom").mkdir(parents=True, exist_ok=True)
     (out / "motions").mkdir(exist_ok=True)
     (out / "reports").mkdir(exist_ok=True)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from stimuli.errors import StimuliError
 from stimuli.render.clip import Look
-from stimuli.render.manifest import manifest_row, read_manifest, write_manifest
+from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, write_manifest
 from stimuli.render.settings import inputs_hash, look_for
 from stimuli.render.video import check_interrupted, install_interrupt_handler
 
@@ -139,7 +139,7 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
             rows.pop(job.stimulus.stimulus_id, None)
             todo.append(job)
     out_dir.mkdir(parents=True, exist_ok=True)
-    report.manifest = write_manifest(out_dir, _ordered(rows, order))
+    report.manifest = _update_manifest(out_dir, _ordered(rows, order))
     workers = max(1, min(workers or min(2, os.cpu_count() or 1), len(todo) or 1))
     previous_handler = install_interrupt_handler()
     try:
@@ -147,7 +147,7 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
             if row is not None:
                 rows[sid] = row
                 report.rendered.append(sid)
-                write_manifest(out_dir, _ordered(rows, order))
+                report.manifest = write_manifest(out_dir, _ordered(rows, order))
             else:
                 report.failed[sid] = error
     finally:
@@ -161,6 +161,15 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     if report.failed and strict:
         raise StimuliError(_failure_message(protocol, report))
     return report
+
+
+def _update_manifest(out_dir: Path, rows: list[dict]) -> Path | None:
+    """Write the manifest of the clips kept so far; with none, remove a stale one rather than leave
+    an empty file (a CSV without even a header) that later steps would misread."""
+    if rows:
+        return write_manifest(out_dir, rows)
+    (out_dir / MANIFEST).unlink(missing_ok=True)
+    return None
 
 
 def _ordered_ids(rows: dict, order: list[str]) -> list[str]:

@@ -22,6 +22,8 @@ def parse_body(text: str) -> dict:
     fields = {}
     for part in text.split(","):
         key, _, value = part.partition("=")
+        if key.strip().lower() in fields:  # the last would silently win
+            raise StimuliError(f"--body {text!r}: {key.strip()} is given twice")
         fields[key.strip().lower()] = value.strip()
     try:
         return {"sex": fields["sex"].upper(), "height_m": float(fields["height"]), "bmi": float(fields["bmi"])}
@@ -34,12 +36,40 @@ def parse_camera(text: str) -> tuple[float, float, float, float]:
         az, el, dist, fov = (float(x) for x in text.split(","))
     except ValueError:
         raise StimuliError(f"--camera: expected azimuth,elevation,distance,fov such as 35,10,4,40, got {text!r}") from None
+    if not all(np.isfinite((az, el, dist, fov))):
+        raise StimuliError(f"--camera: expected finite numbers, got {text!r}")
+    # The same limits as a protocol's clip.camera.
+    if not 0.5 < dist <= 50:
+        raise StimuliError(f"--camera {text}: distance {dist:g} m must lie in (0.5, 50] metres")
+    if not 5 < fov < 150:
+        raise StimuliError(f"--camera {text}: field of view {fov:g}° must lie between 5 and 150 degrees")
     return az, el, dist, fov
+
+
+def check_options(args) -> None:
+    """Every option in range and the output writable, before a body is fitted or a frame drawn."""
+    from stimuli.commands.checks import human_body, positive
+    from stimuli.fileio import check_output_file
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".mp4":
+        raise StimuliError(f"--out: expected a .mp4 file name, got {out}")
+    check_output_file(out)
+    check_output_file(out.with_suffix(".png"), "--out (its poster)")
+    positive("--duration", args.duration, "a duration > 0 seconds")
+    positive("--fps", args.fps, "a frame rate > 0")
+    if args.speed is not None and not (np.isfinite(args.speed) and args.speed >= 0):
+        raise StimuliError(f"--speed: expected a belt speed >= 0 m/s, got {args.speed}")
+    if args.duration * args.fps < 1:
+        raise StimuliError(f"--duration {args.duration:g} s at --fps {args.fps} gives no frame")
+    spec = parse_body(args.body)
+    human_body(spec["height_m"], spec["bmi"], "--body height", "--body bmi")
 
 
 def preview(args) -> Path:
     from stimuli.bodies import fit_body
 
+    check_options(args)
     width, height = parse_resolution(args.resolution)
     az, el, dist, fov = parse_camera(args.camera)
     spec = parse_body(args.body)
@@ -48,8 +78,6 @@ def preview(args) -> Path:
     body = fit_body(spec["sex"], spec["height_m"], spec["bmi"])
     rot, root, speed = _poses(args, body, look)
     out = Path(args.out)
-    if out.suffix.lower() != ".mp4":
-        raise StimuliError(f"--out: expected a .mp4 file name, got {out}")
     write_video(render_frames(look, [Figure(body, rot, root, speed)]), out, look.fps, width, height, look.n_frames,
                 poster=out.with_suffix(".png"))
     return out
