@@ -290,9 +290,8 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     fwd /= np.maximum(np.linalg.norm(fwd, axis=1, keepdims=True), 1e-12)
     axis = np.cross(fwd, np.array([0.0, 1.0, 0.0]))
     angles = np.radians(np.arange(0.0, MAX_TOE_LIFT_DEG + 0.25, 0.5))
-    lows = np.stack([
-        ankle[todo, 1] + quat.rotate(quat.from_axis_angle(axis * a)[:, None], offsets[todo])[:, :, 1].min(axis=1)
-        for a in angles], axis=1)
+    turns = quat.from_axis_angle(axis[:, None] * angles[None, :, None])          # todo × angles × 4
+    lows = ankle[todo, 1, None] + quat.rotate(turns[:, :, None], offsets[todo][:, None])[..., 1].min(axis=2)
     enough = lows >= floor[todo, None]
     pick = np.where(enough.any(axis=1), np.argmax(enough, axis=1), np.argmax(lows, axis=1))
     out[todo] = quat.mul(quat.from_axis_angle(axis * angles[pick][:, None]), foot[todo])
@@ -502,7 +501,7 @@ def _turn_about(pivot, arm, axis, angle):
     return pivot + quat.rotate(quat.from_axis_angle(axis * angle[:, None]), arm)
 
 
-def _bisect(f, lo, hi, iterations: int = 30):
+def _bisect(f, lo, hi, iterations: int = 20):
     """Per row, the angle in [lo, hi] where the boolean ``f`` turns from True to False."""
     for _ in range(iterations):
         mid = (lo + hi) / 2
@@ -584,7 +583,7 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
 
         def below(angle):
             q = quat.from_axis_angle(axis * angle[:, None])
-            return np.min([quat.rotate(q, others[:, k])[:, 1] for k in range(others.shape[1])], axis=0) < -1e-4
+            return quat.rotate(q[:, None], others)[:, :, 1].min(axis=1) < -1e-4
 
         lo = _bisect(below, np.full(len(todo), -np.radians(60.0)), lo)
     # The distance to the hip shrinks as the heel rises.
