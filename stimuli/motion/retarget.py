@@ -174,8 +174,9 @@ def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = Fals
 
 
 def planted(motion: Motion, body) -> dict[str, np.ndarray]:
-    """Feet in contact: heel strike to toe off (Zeni events), grown by up to two frames where the
-    foot is still near the ground; detected from height and belt-relative speed if no events."""
+    """Feet in contact: heel strike to toe off (Zeni events), grown by up to two frames before
+    heel strike where the foot is already near the ground; detected from height and belt-relative
+    speed if no events."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
     belt = np.array([0.0, 0.0, -float(motion.metadata.get("belt_speed_mps", 0.0))]) \
@@ -199,17 +200,17 @@ def planted(motion: Motion, body) -> dict[str, np.ndarray]:
 
 
 def _dilate_near_ground(contact: np.ndarray, low: np.ndarray, cyclic: bool, height: float = NEAR_GROUND_M) -> np.ndarray:
-    """Grow each contact over neighbouring frames whose lowest point is still near the ground: the
-    landing and lift-off frames are planted too (a foot grazing the ground must not slide)."""
+    """Grow each contact back over the frames before it whose lowest point is already near the
+    ground: a landing foot grazing the ground must not slide. Not forward: after lift-off a foot
+    near the ground is already swinging forward, and pinning it to its footprint stretched the leg
+    back and snapped the knee (a CMU walk's 43° → 11° → 38°); the swing clearance lifts it instead."""
     c = contact.copy()
-    n = len(c)
     if not c.any():
         return c
     for _ in range(2):
-        grow = (np.roll(c, 1) | np.roll(c, -1)) & ~c & (low < height)
+        grow = np.roll(c, -1) & ~c & (low < height)
         if not cyclic:
-            grow[0] &= c[1]
-            grow[-1] &= c[-2]
+            grow[-1] = False
         if not grow.any():
             break
         c |= grow
