@@ -155,6 +155,21 @@ def test_long_csv_repetition_outside_the_range_is_not_called_a_duplicate(designs
     assert result.reconciles
 
 
+def test_long_csv_repetition_that_is_not_a_number_is_a_malformed_row(designs, tmp_path):
+    """It used to be renumbered by the importer without a word."""
+    def rep_two(rows):
+        i, practice = rows[0].index("repetition"), rows[0].index("practice")
+        next(r for r in rows[1:] if r[practice] == "0")[i] = "two"
+
+    design = load_design(designs["exp1_shape_motion"])
+    from analysis.responses import import_responses
+    result = import_responses(rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"),
+                                          rep_two), design)
+    excluded = result.exclusions.dropna(subset=["row"])
+    assert list(excluded["reason"]) == ["malformed row"]
+    assert "column 'repetition' is 'two'" in excluded["detail"].iloc[0]
+
+
 # -- 5. a between factor left with one level ------------------------------------------------------------------
 
 def test_lost_between_level_names_the_file_and_the_excluded_participant(designs, run_cli, tmp_path):

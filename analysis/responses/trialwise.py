@@ -50,6 +50,12 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
         if not pid:
             exclusions.append(Exclusion(number, pid, "no participant id", f"column {pid_col!r} is empty"))
             continue
+        stated = _text(record.get("repetition"))
+        if stated and not _whole(stated):
+            # Renumbering it would silently put the answer on another repetition.
+            exclusions.append(Exclusion(number, pid, "malformed row",
+                                        f"column 'repetition' is {stated!r}; expected a whole number ≥ 1"))
+            continue
         answers.append(_answer(record, number, pid, sid, jspsych, between, within))
     if raw.format == "long":
         exclusions += unread_columns(raw, [*between, *within])
@@ -114,6 +120,12 @@ def _text(value) -> str:
     if isinstance(value, float) and value.is_integer():
         return str(int(value))
     return str(value).strip()
+
+
+def _whole(text: str) -> bool:
+    """A cell holding a whole number ≥ 1 (``2`` or ``2.0``)."""
+    number = _number(text)
+    return number is not None and number >= 1 and float(number).is_integer()
 
 
 def _number(value) -> float | None:
