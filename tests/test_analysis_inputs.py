@@ -125,6 +125,32 @@ def test_long_csv_factor_column_that_contradicts_the_design_is_an_error(designs,
     assert not (tmp_path / "out").exists()
 
 
+def test_long_csv_placement_that_contradicts_the_design_is_an_error(designs, run_cli, tmp_path):
+    """A 2AFC answer is scored through the design's left/right placement: a file whose clips stood the
+    other way round would have been scored against the wrong alternative without a word."""
+    placement = pd.read_csv(designs["exp2_com_vs_average"] / "conditions.csv").set_index("stimulus_id")
+
+    def add_placement(rows, swap_once=True):
+        sid, practice = rows[0].index("stimulus_id"), rows[0].index("practice")
+        rows[0] += ["left", "right"]
+        for r in rows[1:]:
+            r += [placement.loc[r[sid], "left"], placement.loc[r[sid], "right"]]
+        if swap_once:
+            row = next(r for r in rows[1:] if r[practice] == "0")
+            row[-2], row[-1] = row[-1], row[-2]
+
+    agreeing = rewrite_csv(responses(designs["exp2_com_vs_average"], tmp_path / "ok.csv", "long"),
+                           lambda rows: add_placement(rows, swap_once=False))
+    code, _, err = run_cli("analyze", designs["exp2_com_vs_average"], "--responses", agreeing, "--out",
+                           tmp_path / "ok", "--no-models")
+    assert code == 0, err
+
+    answers = rewrite_csv(responses(designs["exp2_com_vs_average"], tmp_path / "r.csv", "long"), add_placement)
+    code, _, err = run_cli("analyze", designs["exp2_com_vs_average"], "--responses", answers, "--out", tmp_path / "out")
+    assert code == 2 and says(err, "r.csv: row", "column 'left' is", "in conditions.csv")
+    assert not (tmp_path / "out").exists()
+
+
 # -- 4. repetitions outside the design ------------------------------------------------------------------------
 
 def test_qualtrics_column_with_a_repetition_the_design_lacks_is_named(designs, run_cli, tmp_path):

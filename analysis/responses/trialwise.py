@@ -22,6 +22,10 @@ LONG_COLUMNS = {"stimulus_id", "response", "button_pressed", "rt", "rt_ms", "rep
                 "shapemotion_protocol"}
 
 
+# Columns that restate a stimulus's row of conditions.csv; checked against it like factor columns.
+RESTATED = ("condition_id", "left", "right", "positions")
+
+
 def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
     """Answers and row exclusions of a jsPsych or long file (one row per answer).
 
@@ -91,7 +95,9 @@ def _answer(record: dict, number: int, pid: str, sid: str, jspsych: bool, betwee
     rep = _number(record.get("repetition"))
     trial = _number(record.get("trial"))  # jsPsych's trial_index counts every row; order is re-derived later
     groups = {n: _text(record.get(n)) for n in between if _text(record.get(n))}
-    declared = {n: _text(record.get(n)) for n in within if _text(record.get(n))}
+    # The placement columns restate the design too: the score reads the design's, so a file whose
+    # clips stood elsewhere on screen would be scored against the wrong alternative.
+    declared = {n: _text(record.get(n)) for n in (*within, *RESTATED) if _text(record.get(n))}
     return Answer(number, pid, sid, value, "response", int(rep) if rep is not None else None,
                   int(trial) if trial is not None else None, rt, ranks, groups, declared)
 
