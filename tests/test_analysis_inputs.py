@@ -166,16 +166,21 @@ def test_qualtrics_column_with_a_repetition_the_design_lacks_is_named(designs, r
     assert "duplicate answer" not in err
 
 
-def test_long_csv_repetition_outside_the_range_is_not_called_a_duplicate(designs, tmp_path):
-    def rep7(rows):
+def import_with_repetition(designs, tmp_path, value: str):
+    """Exp. 1 long-CSV responses with the first test row's ``repetition`` cell set to ``value``:
+    the import result and its row exclusions."""
+    def edit(rows):
         i, practice = rows[0].index("repetition"), rows[0].index("practice")
-        next(r for r in rows[1:] if r[practice] == "0")[i] = "7"
+        next(r for r in rows[1:] if r[practice] == "0")[i] = value
 
-    design = load_design(designs["exp1_shape_motion"])
     from analysis.responses import import_responses
-    result = import_responses(rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"),
-                                          rep7), design)
-    excluded = result.exclusions.dropna(subset=["row"])
+    result = import_responses(rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"), edit),
+                              load_design(designs["exp1_shape_motion"]))
+    return result, result.exclusions.dropna(subset=["row"])
+
+
+def test_long_csv_repetition_outside_the_range_is_not_called_a_duplicate(designs, tmp_path):
+    result, excluded = import_with_repetition(designs, tmp_path, "7")
     assert list(excluded["reason"]) == ["repetition outside the design"]
     assert "column 'repetition' is 7" in excluded["detail"].iloc[0] and "times" not in excluded["detail"].iloc[0]
     assert result.reconciles
@@ -183,15 +188,7 @@ def test_long_csv_repetition_outside_the_range_is_not_called_a_duplicate(designs
 
 def test_long_csv_repetition_that_is_not_a_number_is_a_malformed_row(designs, tmp_path):
     """It used to be renumbered by the importer without a word."""
-    def rep_two(rows):
-        i, practice = rows[0].index("repetition"), rows[0].index("practice")
-        next(r for r in rows[1:] if r[practice] == "0")[i] = "two"
-
-    design = load_design(designs["exp1_shape_motion"])
-    from analysis.responses import import_responses
-    result = import_responses(rewrite_csv(responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long"),
-                                          rep_two), design)
-    excluded = result.exclusions.dropna(subset=["row"])
+    _, excluded = import_with_repetition(designs, tmp_path, "two")
     assert list(excluded["reason"]) == ["malformed row"]
     assert "column 'repetition' is 'two'" in excluded["detail"].iloc[0]
 
