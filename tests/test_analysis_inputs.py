@@ -112,6 +112,22 @@ def test_long_csv_extra_column_is_reported_as_not_imported(designs, run_cli, tmp
     assert "columns not imported: comment" in out
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+def test_jspsych_column_of_the_lab_is_reported_as_not_imported(designs, run_cli, tmp_path, suffix):
+    """jsPsych's own fields and the exported experiment's bookkeeping pass without a note; a field the lab
+    added (here ``age``, as ``jsPsych.data.addProperties`` would) is listed, like in the other formats."""
+    answers = responses(designs["exp1_shape_motion"], tmp_path / f"r{suffix}", "jspsych")
+    code, out, err = run_cli("responses", "inspect", answers, "--design", designs["exp1_shape_motion"])
+    assert code == 0 and "not imported" not in out, err + out
+    if suffix == ".json":
+        trials = json.loads(answers.read_text(encoding="utf-8"))
+        answers.write_text(json.dumps([dict(t, age=30) for t in trials]), encoding="utf-8")
+    else:
+        rewrite_csv(answers, lambda rows: [r.append("age" if i == 0 else "30") for i, r in enumerate(rows)])
+    code, out, err = run_cli("responses", "inspect", answers, "--design", designs["exp1_shape_motion"])
+    assert code == 0 and "columns not imported: age" in out, err + out
+
+
 def test_long_csv_factor_column_that_contradicts_the_design_is_an_error(designs, run_cli, tmp_path):
     def gait_walk(rows):
         for i, r in enumerate(rows):

@@ -22,6 +22,18 @@ LONG_COLUMNS = {"stimulus_id", "response", "button_pressed", "rt", "rt_ms", "rep
                 "shapemotion_protocol"}
 
 
+# jsPsych data columns that carry no answer of their own: the core fields of every trial
+# (jsPsych 7 and 8), the fields of the plugins a shapemotion experiment runs (preload, button
+# responses, survey forms), and the bookkeeping the exported experiment adds to its trials
+# (``response_label``, ``rating`` and ``chosen`` restate ``response``; ``rank_step`` numbers a ranking's
+# picks). Any other column — e.g. a lab's own ``jsPsych.data.addProperties`` field — is listed as not
+# imported, as in the other formats.
+JSPSYCH_COLUMNS = {"trial_type", "trial_index", "time_elapsed", "internal_node_id", "plugin_version",
+                   "timeline_variables", "stimulus", "success", "timeout", "failed_images", "failed_audio",
+                   "failed_video", "view_history", "question_order", "list", "protocol", "clip_id",
+                   "response_label", "rating", "chosen", "rank_step"}
+
+
 # Columns that restate a stimulus's row of conditions.csv; checked against it like factor columns.
 RESTATED = ("condition_id", "left", "right", "positions")
 
@@ -61,18 +73,18 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
                                         f"column 'repetition' is {stated!r}; expected a whole number ≥ 1"))
             continue
         answers.append(_answer(record, number, pid, sid, jspsych, between, within))
-    if raw.format == "long":
-        exclusions += unread_columns(raw, [*between, *within])
-    return answers, exclusions
+    return answers, exclusions + unread_columns(raw, [*between, *within])
 
 
 def unread_columns(raw: RawFile, factors: list[str]) -> list[Exclusion]:
-    """Column notes for the long-CSV columns the importer does not read (e.g. a free-text comment).
+    """Column notes for the columns the importer does not read (e.g. a free-text comment).
 
     Listed like the Qualtrics columns that name no stimulus, so nothing a user gave disappears unmentioned.
     """
-    known = LONG_COLUMNS | set(factors) | {_participant_column(raw.columns)}
-    return [Exclusion(None, "", "column not imported", f"column {name!r} is not a column the long format reads "
+    jspsych = raw.format.startswith("jspsych")
+    known = LONG_COLUMNS | set(factors) | {_participant_column(raw.columns)} | (JSPSYCH_COLUMNS if jspsych else set())
+    fmt = "jsPsych data" if jspsych else "the long format"
+    return [Exclusion(None, "", "column not imported", f"column {name!r} is not a column {fmt} reads "
                                                        f"(participant, stimulus_id, response, rt, repetition, trial, "
                                                        f"factor columns, …); column not imported", name)
             for name in raw.columns if name not in known]
