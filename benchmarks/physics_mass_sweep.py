@@ -7,7 +7,12 @@ gains scaled by 1, 1/4 and 1/10 (``k_d`` by the square root, so the damping rati
 the joint-centre knee flexion peaks (swing = the cycle's maximum, stance = first 40 %) against the
 reference's, the tracking RMS and whether the ragdoll fell. Prints numbers; asserts nothing.
 
-    python benchmarks/physics_mass_sweep.py [--sex F|M]
+``--strength`` asks the other way a fixed controller could make mass show: at the shipped gains,
+every actuator's torque is limited, per direction, to what the body needs at its own weight (its
+peak over the recorded pass, times ``--margin``): the same muscles carrying more mass. ``--gait
+jog`` sweeps the jog (its own gains) instead of the walk.
+
+    python benchmarks/physics_mass_sweep.py [--sex F|M] [--gait walk|jog] [--strength [--margin 1.0]]
 """
 
 from __future__ import annotations
@@ -26,38 +31,76 @@ GAIN_SCALES = (1.0, 0.25, 0.1)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sex", choices=("F", "M"), default="M")
-    sex = parser.parse_args().sex
+    parser.add_argument("--gait", choices=("walk", "jog"), default="walk")
+    parser.add_argument("--strength", action="store_true", help="limit torques to the own-weight peaks")
+    parser.add_argument("--margin", type=float, default=1.0, help="limits = own-weight peaks × margin")
+    args = parser.parse_args()
+    sex, gait = args.sex, args.gait
 
     from stimuli.bodies import fit_body
     from stimuli.motion.average import protocol_average
     from stimuli.motion.loop import cycles_for_clip
-    from stimuli.physics import Gains, retarget
-    from stimuli.physics.analysis_fig7 import gait_curves, reference_heel_strike_s
+    from stimuli.physics import Gains
+    from stimuli.physics.analysis_fig7 import reference_heel_strike_s
     from stimuli.protocol import load_protocol
 
     protocol = load_protocol(PROTOCOL)
-    cycles = cycles_for_clip(protocol.clip.duration_s, protocol.gaits["walk"].cadence_spm)
-    motion = protocol_average(protocol, sex, "walk", cycles=cycles)  # as the physics step makes it
+    cycles = cycles_for_clip(protocol.clip.duration_s, protocol.gaits[gait].cadence_spm)
+    motion = protocol_average(protocol, sex, gait, cycles=cycles)  # as the physics step makes it
     body = fit_body(sex, motion.metadata["height_m"], motion.metadata["bmi"])
     own = float(body.anthropometry.mass_kg)
     start = reference_heel_strike_s(motion)
-    shipped = Gains.load()
-    print(f"{sex} reference body {body.body_id} ({own:.1f} kg), NoCOM walk of {', '.join(motion.metadata['actors'])}")
+    n_cycles = int(motion.metadata.get("cycles", 2))  # gait cycles in the clip
+    shipped = Gains.load(gait=gait)
+    print(f"{sex} reference body {body.body_id} ({own:.1f} kg), NoCOM {gait} of {', '.join(motion.metadata['actors'])}")
     print(f"{'gain×':>6}{'kg':>7}{'swing°':>8}{'ref':>7}{'Δ':>7}{'stance°':>9}{'ref':>7}{'Δ':>7}{'rms°':>7}  fell")
+    if args.strength:
+        limits = torque_peaks(run(motion, body, own, shipped), args.margin)
+        for factor in WEIGHT_FACTORS:
+            print_row(f"{args.margin:>5.2f}s", own * factor, run(motion, body, own * factor, shipped, limits), start, n_cycles)
+        return
     for scale in GAIN_SCALES:
         gains = dataclasses.replace(shipped, k_p=shipped.k_p * scale, k_d=shipped.k_d * np.sqrt(scale))
         for factor in WEIGHT_FACTORS:
-            result = retarget(motion, body, own * factor, reference_body=body, gains=gains)
-            rep = result.report
-            if result.sim.fell:
-                print(f"{scale:>6.2f}{own * factor:>7.1f}  fell at {rep['fall_time_s']:.2f} s: {rep['fall_reason']}")
-                continue
-            c = gait_curves(result.sim, result.ragdoll, int(motion.metadata.get("cycles", 2)), start)
-            ref = np.array(c["reference_knee_flexion_deg"])
-            ref_stance = float(ref[:41].max())
-            print(f"{scale:>6.2f}{own * factor:>7.1f}{c['knee_flexion_peak_deg']:>8.2f}{ref.max():>7.2f}"
-                  f"{c['knee_flexion_peak_change_deg']:>+7.2f}{c['knee_flexion_stance_peak_deg']:>9.2f}{ref_stance:>7.2f}"
-                  f"{c['knee_flexion_stance_peak_deg'] - ref_stance:>+7.2f}{rep['tracking_rms_deg_overall']:>7.2f}  no")
+            print_row(f"{scale:>6.2f}", own * factor, run(motion, body, own * factor, gains), start, n_cycles)
+
+
+def run(motion, body, weight_kg: float, gains, limits: dict | None = None):
+    """Simulate ``motion`` on ``body`` at ``weight_kg``, actuators limited to ``limits`` (N·m) if given."""
+    from stimuli.physics.retarget import prepare, tracking_rms
+    from stimuli.physics.simulate import simulate
+
+    ref, ragdoll, model, gains = prepare(motion, body, weight_kg, gains)
+    for name, (low, high) in (limits or {}).items():
+        a = model.actuator(name).id
+        model.actuator_forcelimited[a] = 1
+        model.actuator_forcerange[a] = (low, high)
+    warmup = max(1, int(np.ceil(4.0 / ref.period - 1.0 - 1e-9)))  # as retarget: ≥ 4 s simulated
+    sim = simulate(model, ref, gains, warmup_loops=warmup)
+    track = list(tracking_rms(sim, ragdoll).values())
+    return sim, ragdoll, float(np.sqrt(np.mean(np.square(track))))
+
+
+def torque_peaks(result, margin: float) -> dict[str, tuple[float, float]]:
+    """Per actuator, the lowest and highest torque of the recorded pass, times ``margin``."""
+    sim = result[0]
+    return {name: (margin * float(low), margin * float(high))
+            for name, low, high in zip(sim.dof_names, sim.actuator_force.min(axis=0), sim.actuator_force.max(axis=0))}
+
+
+def print_row(label: str, weight_kg: float, result, start: float, n_cycles: int) -> None:
+    from stimuli.physics.analysis_fig7 import gait_curves
+
+    sim, ragdoll, rms = result
+    if sim.fell:
+        print(f"{label:>6}{weight_kg:>7.1f}  fell at {sim.fall_time_s:.2f} s: {sim.fall_reason}")
+        return
+    c = gait_curves(sim, ragdoll, n_cycles, start)
+    ref = np.array(c["reference_knee_flexion_deg"])
+    ref_stance = float(ref[:41].max())
+    print(f"{label:>6}{weight_kg:>7.1f}{c['knee_flexion_peak_deg']:>8.2f}{ref.max():>7.2f}"
+          f"{c['knee_flexion_peak_change_deg']:>+7.2f}{c['knee_flexion_stance_peak_deg']:>9.2f}{ref_stance:>7.2f}"
+          f"{c['knee_flexion_stance_peak_deg'] - ref_stance:>+7.2f}{rms:>7.2f}  no")
 
 
 if __name__ == "__main__":

@@ -132,6 +132,19 @@ def test_fall_is_reported_not_hidden(walk, bodies):
         retarget(walk, bodies["ref"], gains=weak, raise_on_fall=True)
 
 
+def test_trunk_folding_over_a_held_pelvis_is_a_fall(walk, bodies):
+    """The root wrench keeps the pelvis up; a trunk without spine torque folds over it: that is a fall."""
+    from stimuli.physics.retarget import prepare
+    from stimuli.physics.simulate import simulate
+
+    ref, _, model, gains = prepare(walk, bodies["ref"])
+    for a in range(model.nu):
+        if model.actuator(a).name.startswith("spine"):
+            model.actuator_gainprm[a, 0] = model.actuator_biasprm[a, 1] = model.actuator_biasprm[a, 2] = 0.0
+    sim = simulate(model, ref, gains)
+    assert sim.fell and sim.fall_reason.startswith("trunk tilted"), sim.fall_reason
+
+
 def test_fig7_curves_and_plot(ref_result, walk, tmp_path):
     from stimuli.physics.analysis_fig7 import gait_curves, normative_curves, plot_fig7, reference_heel_strike_s
 

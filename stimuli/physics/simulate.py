@@ -21,8 +21,10 @@ MIN_RATE_HZ = 500.0
 # 8 kHz a walk's vertical root drift went 4.0 → 1.5 → 1.5 → 1.5 cm and the share of steps with no
 # foot on the floor 0.28 → 0.21 → 0.17 → 0.13 (F_Hi1); still 4–7× faster than real time.
 DEFAULT_RATE_HZ = 4000.0
-# A fall: pelvis below this fraction of its target height, trunk tilted beyond this angle, or
-# the root this far (m) from its target horizontally.
+# A fall: pelvis below this fraction of its target height, pelvis or trunk tilted beyond this
+# angle, or the root this far (m) from its target horizontally. The trunk is checked on its own:
+# the root wrench can hold the pelvis upright while the trunk folds over it (a ragdoll whose
+# actuators were limited to a lighter body's torques folded its spine 160° without a "fall").
 FALL_HEIGHT_FRACTION = 0.6
 FALL_TILT_DEG = 60.0
 FALL_DRIFT_M = 0.5
@@ -43,7 +45,7 @@ class SimResult:
     root_target: np.ndarray
     pelvis_com: np.ndarray
     body_com: np.ndarray
-    knee_torque: np.ndarray
+    actuator_force: np.ndarray   # every simulation step of the recorded pass × actuator (N·m)
     foot_contact: np.ndarray
     step_times: np.ndarray
     fell: bool
@@ -53,6 +55,11 @@ class SimResult:
     wall_s: float
     body_names: list[str]
     dof_names: list[str]
+
+    @property
+    def knee_torque(self) -> np.ndarray:
+        """Left and right knee actuator torques (N·m) at every step of the recorded pass."""
+        return self.actuator_force[:, [self.dof_names.index("knee.L"), self.dof_names.index("knee.R")]]
 
 
 def steps_per_frame(fps: float, rate_hz: float = DEFAULT_RATE_HZ) -> int:
@@ -125,11 +132,11 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     target["root_pos"][:, 1] += lift
     dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
     pelvis = model.body("pelvis").id
-    knees = [model.actuator(f"knee.{s}").id for s in "LR"]
+    trunk = model.body("spine").id
     foot_geoms = [model.geom(f"foot.{s}").id for s in "LR"]
     _initial_state(model, data, target, dof_adr)
     rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "pelvis_com", "body_com")}
-    knee_torque = np.zeros((n_steps, 2))
+    forces = np.zeros((n_steps, model.nu))
     contact = np.zeros((n_steps, 2), bool)
     target_height = target["root_pos"][:, 1]
     fell, fall_time, reason = False, None, ""
@@ -143,12 +150,12 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
             fell, fall_time, reason = True, (i + 1) * dt, "the simulation diverged (gains unstable for this body)"
             break
-        knee_torque[i] = data.actuator_force[knees]
+        forces[i] = data.actuator_force
         if data.ncon:
             geoms = data.contact.geom[: data.ncon]
             contact[i] = [np.any(geoms == g) for g in foot_geoms]
         if i % k == 0:
-            reason = _fall_reason(data, pelvis, target, i, target_height[i])
+            reason = _fall_reason(data, pelvis, trunk, target, i, target_height[i])
             if reason:
                 fell, fall_time = True, (i + 1) * dt
                 break
@@ -162,7 +169,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     first = start_frame * k
     return SimResult(
         fps=ref.fps, timestep=dt, times=(np.arange(len(out["qpos"])) + start_frame) / ref.fps, **out,
-        knee_torque=knee_torque[first:i + 1], foot_contact=contact[first:i + 1],
+        actuator_force=forces[first:i + 1], foot_contact=contact[first:i + 1],
         step_times=np.arange(first, i + 1) * dt, fell=fell, fall_time_s=fall_time, fall_reason=reason,
         simulated_s=simulated, wall_s=wall, body_names=[model.body(b).name for b in range(model.nbody)],
         dof_names=[model.actuator(a).name for a in range(model.nu)])
@@ -179,15 +186,16 @@ def _record(rec: dict, data, target: dict, i: int, dof_adr: np.ndarray, pelvis: 
     rec["body_com"].append(data.subtree_com[pelvis].copy())
 
 
-def _fall_reason(data, pelvis: int, target: dict, i: int, target_height: float) -> str:
+def _fall_reason(data, pelvis: int, trunk: int, target: dict, i: int, target_height: float) -> str:
     """Why the ragdoll counts as fallen at this step ('' when it stands)."""
     height = data.xpos[pelvis][1]
     if height < FALL_HEIGHT_FRACTION * target_height:
         return f"pelvis at {height:.2f} m, below {FALL_HEIGHT_FRACTION:.0%} of its target height {target_height:.2f} m"
-    up = data.xmat[pelvis].reshape(3, 3)[:, 1]
-    tilt = math.degrees(math.acos(max(-1.0, min(1.0, up[1]))))
-    if tilt > FALL_TILT_DEG:
-        return f"pelvis tilted {tilt:.0f}° from vertical (limit {FALL_TILT_DEG:.0f}°)"
+    for name, body in (("pelvis", pelvis), ("trunk", trunk)):
+        up = data.xmat[body].reshape(3, 3)[:, 1]   # the segment's rest-pose up axis, in the world
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, up[1]))))
+        if tilt > FALL_TILT_DEG:
+            return f"{name} tilted {tilt:.0f}° from vertical (limit {FALL_TILT_DEG:.0f}°)"
     drift = float(np.linalg.norm((data.xpos[pelvis] - target["root_pos"][i])[[0, 2]]))
     if drift > FALL_DRIFT_M:
         return f"pelvis {drift:.2f} m away from its target horizontally (limit {FALL_DRIFT_M} m)"
