@@ -52,6 +52,18 @@ def test_generate_import_average_modify_metrics_export(tmp_path, capsys):
     assert (tmp_path / "s.png").stat().st_size > 10_000
 
 
+def test_metrics_of_a_raw_capture_judge_contact_from_its_own_floor(tmp_path, capsys):
+    """The CMU walk stands 1–2 cm above its toes' push-off dip: judged from y = 0 it read as 9 % stance
+    and 82 % flight; judged from the level its feet stand at, it walks, and the CLI says why."""
+    assert main(["motion", "import", str(WALK), "--loop", "--cycles", "2", "--out", str(tmp_path / "c.npz")]) == 0
+    capsys.readouterr()
+    assert main(["motion", "metrics", str(tmp_path / "c.npz")]) == 0
+    out, err = capsys.readouterr()
+    q = json.loads(out)
+    assert q["stance_pct"] > 45 and q["flight_pct"] < 15 and q["double_support_pct"] > 5, q
+    assert 1.0 < q["stance_height_cm"] < 2.5 and "stand 1.6 cm above y = 0" in err
+
+
 @pytest.mark.parametrize("args,msg", [
     (["motion", "import", "{bad}", "--out", "{out}"], "not a readable BVH"),
     (["motion", "import", "{short}", "--loop", "--out", "{out}"], "fewer than one whole gait cycle"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from stimuli.commands.checks import at_least, human_body, in_range, positive
@@ -12,6 +13,8 @@ from stimuli.fileio import check_output_dir, check_output_file
 
 
 STRIP_SUFFIXES = (".png", ".svg", ".pdf", ".jpg")
+# Feet standing higher than this above y = 0 mark a clip that was not grounded on its flat feet.
+RAW_STANCE_HEIGHT_CM = 0.5
 
 
 def register(subparsers) -> None:
@@ -292,6 +295,11 @@ def run_metrics(args: argparse.Namespace) -> int:
 
         atomic_write_text(args.json, text + "\n")
     print(text)
+    if q.get("stance_height_cm", 0.0) > RAW_STANCE_HEIGHT_CM:
+        print(f"note: the feet stand {q['stance_height_cm']:.1f} cm above y = 0 (a raw capture whose floor is its "
+              f"toes' push-off dip): contact is judged from that level, and stance, double support and flight "
+              f"are approximate on the skeleton's sole points; retarget onto a body and use --body for the "
+              f"mesh's figures", file=sys.stderr)
     return 0
 
 

@@ -87,7 +87,11 @@ def gait_metrics(motion, points: dict | None = None) -> dict:
     grot, gpos = rep.global_transforms()
     pts = sole_points(rep) if points is None else points
     sole = {s: sole_positions(grot, gpos, pts[s]) for s in ("l", "r")}
-    contact = foot_contacts(sole, rep.fps)
+    # Contact within 1 cm of the level each foot stands at, not of y = 0: a raw capture's floor is
+    # where its rigid toes dip at push-off, 1–2 cm below the flat foot, and from y = 0 a CMU walk
+    # read as 9 % stance and 82 % flight. Generated and retargeted clips stand at 0 (unchanged).
+    level = {s: stance_level(sole[s][:, :, 1].min(axis=1), ev[f"{s}_hs"], ev[f"{s}_to"]) for s in ("l", "r")}
+    contact = foot_contacts({s: sole[s] - [0.0, level[s], 0.0] for s in sole}, rep.fps)
     stance = 100.0 * np.mean([contact[s].mean() for s in ("l", "r")])
     both = 100.0 * float(np.mean(contact["l"] & contact["r"]))
     none = 100.0 * float(np.mean(~contact["l"] & ~contact["r"]))
@@ -102,8 +106,25 @@ def gait_metrics(motion, points: dict | None = None) -> dict:
     return {"cadence_spm": float(cadence), "speed_mps": speed,
             "step_length_m": float(speed * 60.0 / cadence) if np.isfinite(cadence) and cadence > 0 else float("nan"),
             "walking_base_m": base, "stance_pct": float(stance), "double_support_pct": both,
-            "flight_pct": none, "cycles": int(cycles), "knee_flexion_range_deg": knee_range,
+            "flight_pct": none, "stance_height_cm": 100.0 * float(np.mean(list(level.values()))),
+            "cycles": int(cycles), "knee_flexion_range_deg": knee_range,
             "knee_flexion_max_deg": float(max(knees["l"].max(), knees["r"].max()))}
+
+
+def stance_level(low: np.ndarray, heel_strikes: np.ndarray, toe_offs: np.ndarray) -> float:
+    """Height (m) a foot stands at: the median of its lowest point from heel strike to toe off.
+
+    0 when there are no events (then contact is judged from the ground itself).
+
+    >>> low = np.array([0.02, 0.02, 0.02, 0.10, 0.20, 0.10])
+    >>> stance_level(low, np.array([0]), np.array([3]))
+    0.02
+    """
+    mask = np.zeros(len(low), bool)
+    for h in heel_strikes:
+        later = toe_offs[toe_offs > h]
+        mask[h:later.min() if len(later) else len(low)] = True
+    return round(float(np.median(low[mask])), 6) if mask.any() else 0.0
 
 
 def _widen(points: np.ndarray, lateral: np.ndarray) -> np.ndarray:
