@@ -167,6 +167,25 @@ def test_cli_retarget_writes_motion_and_report(run_cli, walk, tmp_path):
     assert {"b_m", "segments", "tracking_rms_deg", "root_drift", "fell", "simulated_s", "wall_s"} <= set(report)
     assert len(report["segments"]) == 15
     assert (tmp_path / "com.npz").is_file()
+    # the generated walk records no body weight: the target is its reference, and the user is told
+    assert report["b_m"] == 0 and "records no weight or BMI of its own body" in err
+
+
+def test_cli_retarget_measures_b_against_the_motions_own_body(run_cli, walk, tmp_path):
+    """An average of two motions records their mean body, so b is measured against it (it was the target's: 0)."""
+    from stimuli.motion.average import average_motion
+
+    a, b = walk.replace(), walk.replace()
+    a.metadata.update(height_m=1.61, bmi=20.0, sex="F")
+    b.metadata.update(height_m=1.61, bmi=28.0, sex="F")
+    avg = average_motion([a, b])
+    assert (avg.metadata["height_m"], avg.metadata["bmi"], avg.metadata["sex"]) == (1.61, 24.0, "F")
+    avg.save(tmp_path / "avg.npz")
+    code, _, err = run_cli("physics", "retarget", "--motion", tmp_path / "avg.npz", "--sex", "F", "--height", "1.61",
+                           "--weight", "80", "--out", tmp_path / "com.npz", "--report", tmp_path / "r.json")
+    assert code == 0 and "warning" not in err, err
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["reference_body"]["bmi"] == pytest.approx(24.0, abs=0.01) and report["b_m"] > 0
 
 
 def test_cli_rejects_non_physical_weight(run_cli, walk, tmp_path):

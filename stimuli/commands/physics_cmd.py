@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from stimuli.commands.checks import in_range
@@ -65,17 +66,22 @@ def _check_retarget_options(args: argparse.Namespace) -> None:
 
 
 def _reference(args, motion) -> tuple[float, float]:
-    """Height (m) and weight (kg) of the motion's own body."""
+    """Height (m) and weight (kg) of the motion's own body: the options, else the motion's metadata,
+    else the target's (then b = 0, and a warning says so: the COM change is measured against it)."""
     meta = motion.metadata
     height = args.reference_height or meta.get("height_m") or args.height
     if args.reference_weight is not None:
         weight = args.reference_weight
-    elif "weight_kg" in meta:
+    elif meta.get("weight_kg") is not None:
         weight = meta["weight_kg"]
-    elif "bmi" in meta:
+    elif meta.get("bmi") is not None:
         weight = float(meta["bmi"]) * float(height) ** 2
     else:
         weight = args.weight
+        print(f"warning: {args.motion} records no weight or BMI of its own body, so the target's "
+              f"{args.weight:g} kg is taken as the reference weight"
+              + (" (and its height): b = 0" if height == args.height else "")
+              + "; give --reference-weight (and --reference-height) for the motion's own body", file=sys.stderr)
     return float(height), float(weight)
 
 

@@ -58,6 +58,22 @@ def _path(ref: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
     return dtw_ndim.warping_path(ref.astype(np.double), other.astype(np.double))
 
 
+def _mean_body(motions: list[Motion]) -> dict:
+    """Mean ``height_m`` and ``bmi`` (and the shared ``sex``) of the motions that all record them.
+
+    The average's own body: COM retargeting measures the balance factor b against it.
+    """
+    out = {}
+    for key in ("height_m", "bmi"):
+        values = [m.metadata.get(key) for m in motions]
+        if all(v is not None for v in values):
+            out[key] = float(np.mean(values))
+    sexes = {m.metadata.get("sex") for m in motions}
+    if len(sexes) == 1 and None not in sexes:
+        out["sex"] = sexes.pop()
+    return out
+
+
 def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = None) -> Motion:
     """DTW-aligned average of several motions on the same skeleton (joint names)."""
     if len(motions) < 2:
@@ -96,7 +112,7 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
             "belt_speed_mps": float(np.mean([m.metadata.get("belt_speed_mps", 0.0) for m in motions])),
             "speed_mps": float(np.mean([m.metadata.get("speed_mps", m.metadata.get("belt_speed_mps", 0.0)) for m in motions])),
             "gait": motions[0].metadata.get("gait"), "roles": motions[0].metadata.get("roles"),
-            "naming": motions[0].metadata.get("naming")}
+            "naming": motions[0].metadata.get("naming"), **_mean_body(motions)}
     avg = Motion(fps, names, motions[0].parents, offsets, quat.unroll(rot), root, meta)
     # Averages of looped clips are periodic already: drop the end frame; otherwise close the loop.
     periodic = all(m.metadata.get("looped") for m in motions)
