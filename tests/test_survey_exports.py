@@ -167,6 +167,14 @@ def test_protocol_markup_is_text_in_every_export(tmp_path):
 
 # -- command line and errors --------------------------------------------------------------------------
 
+def test_base_url_that_repeats_the_clips_folder_is_noted(tmp_path, run_cli):
+    """Clip files start with clips/: a base URL ending in clips/ would address …/clips/clips/<id>.mp4."""
+    folder = design_folder(tmp_path, "exp1_shape_motion")
+    code, _, err = run_cli("survey", folder, "--format", "qsf", "--out", tmp_path / "s.qsf",
+                           "--video-base-url", "https://x.org/clips/")
+    assert code == 0 and "ends in clips/" in err and "https://x.org/clips/clips/" in (tmp_path / "s.qsf").read_text()
+
+
 def test_cli_writes_each_format(tmp_path, run_cli):
     folder = design_folder(tmp_path, "exp1_shape_motion")
     code, out, err = run_cli("survey", folder, "--format", "qsf", "--out", tmp_path / "s.qsf",

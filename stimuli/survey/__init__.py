@@ -47,6 +47,11 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
     if fmt in ("qsf", "qualtrics-txt") and not video_base_url:
         result.notes.append("no --video-base-url: clips are referenced by relative paths (clips/…), which a "
                             "survey hosted by Qualtrics cannot load; pass the URL where the clips are served")
+    doubled = doubled_folder(video_base_url, [s.file for s in source.stimuli])
+    if doubled:
+        result.notes.append(f"--video-base-url ends in {doubled}/ and every clip's file starts with {doubled}/, so "
+                            f"clips are addressed as …/{doubled}/{doubled}/…; if the clips themselves are at that URL, "
+                            f"give the address of the folder above {doubled}/")
     if fmt == "qsf":
         from stimuli.survey.qsf import qsf_text
 
@@ -68,6 +73,19 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
 
         write_psychopy(source, out)
     return result
+
+
+def doubled_folder(base_url: str | None, files: list[str]) -> str:
+    """The folder name that ``base_url`` ends in and every clip file starts with ('' if none).
+
+    >>> doubled_folder("https://example.org/clips/", ["clips/a.mp4", "clips/b.mp4"])
+    'clips'
+    >>> doubled_folder("https://example.org/exp1", ["clips/a.mp4"])
+    ''
+    """
+    last = (base_url or "").rstrip("/").rsplit("/", 1)[-1]
+    firsts = {f.replace("\\", "/").partition("/")[0] if "/" in f.replace("\\", "/") else "" for f in files}
+    return last if last and firsts == {last} else ""
 
 
 def export_all(folder: str | Path, out_dir: str | Path | None = None,
