@@ -4,7 +4,9 @@ Layout (Table 3/4 of the paper): Effect, SS, dof, MS, F, p, η² (partial), nc, 
 grouped into main effects / two-way / three-way … interactions, significant rows only unless
 ``all_rows`` (which also appends the error strata). Text formats print p like the paper (``<0.001``,
 ``<0.01``, ``<0.05``, else two decimals); CSV and JSON carry exact numbers. JSON is always the complete
-DESIGN.md record list (every effect), whatever ``all_rows`` says.
+DESIGN.md record list (every effect), whatever ``all_rows`` says. Text formats print sums of squares
+that are rounding noise (relative to the table's total SS) as 0, ``—`` for an effect whose error term
+has no variance (nothing is tested) and ``n.s.`` where Tukey ran but found no pair.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pathlib import Path
 import jinja2
 
 from analysis.anova import EFFECT_COLUMNS, AnovaTable, corrected_p
+from analysis.anova_core import NO_VARIANCE
 from analysis.errors import AnalysisError
 
 TEMPLATE_DIR = Path(__file__).resolve().parent.parent / "results_templates"
@@ -27,6 +30,8 @@ ORDER_TITLES = {1: "Main effects", 2: "Two-way interaction effects", 3: "Three-w
                 4: "Four-way interaction effects", 5: "Five-way interaction effects"}
 HEADERS = ["Effect", "SS", "dof", "MS", "F", "p", "η²", "nc", "power"]
 CSV_COLUMNS = ["section", "effect", "factors"] + EFFECT_COLUMNS + ["p_reported", "posthoc"]
+UNTESTABLE = "—"        # F = 0/0: the error term has no variance (or no df), so there is no test
+NOT_SIGNIFICANT = "n.s."  # Tukey ran on the effect but no pair of its cells differs
 
 
 def format_p(p: float) -> str:
@@ -49,6 +54,43 @@ def format_num(x: float, digits: int = 2) -> str:
     return f"{x:.{digits}f}"
 
 
+def noise_level(table: AnovaTable) -> float:
+    """Sums of squares at or below this are rounding noise (e.g. % NoCOM + % COM = 100 leaves 1e-27 where 0 is
+    exact): the engine's NO_VARIANCE relative to the table's total SS."""
+    return NO_VARIANCE * (float(table.effects["ss"].sum()) + float(table.strata["ss"].sum()))
+
+
+def format_ss(x: float, noise: float) -> str:
+    """An SS or MS as printed: 0 when it is rounding noise, else :func:`format_num`."""
+    return format_num(0.0 if abs(x) <= noise else x)
+
+
+def effect_statistics(row, p: float, noise: float) -> dict[str, str]:
+    """F, p, η², nc and power of one effect as printed.
+
+    ``—`` where F is undefined (no error variance or df: nothing is tested), ∞ where only the error term
+    is rounding noise, 0 where the effect's own SS is (its F, η² and nc are then noise too).
+    """
+    if math.isnan(float(row["F"])):
+        return dict.fromkeys(("F", "p", "eta2", "nc", "power"), UNTESTABLE)
+    shown = {"p": format_p(p), "power": format_num(row["power"])}
+    if abs(row["mse"] * row["df2"]) <= noise:   # a ratio to rounding noise: F → ∞ and observed power → 1
+        return shown | {"F": "∞", "eta2": format_num(row["eta2_partial"]), "nc": "∞", "power": format_num(1.0)}
+    if abs(row["ss"]) <= noise:
+        return shown | dict.fromkeys(("F", "eta2", "nc"), format_num(0.0))
+    return shown | {"F": format_num(row["F"]), "eta2": format_num(row["eta2_partial"]),
+                    "nc": format_num(row["noncentrality"])}
+
+
+def posthoc_text(ph, testable: bool) -> str:
+    """The post-hoc cell: the paper's summary, ``n.s.`` when Tukey found no pair, ``—`` for an untested effect."""
+    if ph is None:
+        return ""
+    if not testable:
+        return UNTESTABLE
+    return ph.summary or NOT_SIGNIFICANT
+
+
 def format_df(x: float) -> str:
     return f"{x:.0f}" if float(x).is_integer() else f"{x:.2f}"
 
@@ -57,7 +99,8 @@ def _order_title(order: int) -> str:
     return ORDER_TITLES.get(order, f"{order}-way interaction effects")
 
 
-def _tex_escape(s: str) -> str:
+def tex_escape(s: str) -> str:
+    """Text for pdflatex: LaTeX's special characters escaped, η², α, ×, ε and – as TeX."""
     repl = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
             "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "<": r"$<$", ">": r"$>$"}
     out = "".join(repl.get(c, c) for c in str(s))
@@ -83,7 +126,7 @@ def _env() -> jinja2.Environment:
         autoescape=lambda name: bool(name) and name.endswith(".html.j2"),
         trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True, undefined=jinja2.StrictUndefined,
     )
-    env.filters.update(tex=_tex_escape, csvrow=_csv_row, json=_json)
+    env.filters.update(tex=tex_escape, csvrow=_csv_row, json=_json)
     return env
 
 
@@ -111,6 +154,7 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
     if correction not in ("none", "gg", "hf"):
         raise AnalysisError(f"unknown sphericity correction {correction!r}; use none, gg or hf")
     a = table.alpha if alpha is None else float(alpha)
+    noise = noise_level(table)
     sections: dict[int, list] = {}
     for name, row in table.effects.iterrows():
         p = corrected_p(row, correction)
@@ -118,21 +162,16 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
             continue
         eps = float(row["eps_gg" if correction == "gg" else "eps_hf"]) if correction != "none" else float("nan")
         scale = eps if not math.isnan(eps) else 1.0
-        ph = table.posthoc.get(name)
         sections.setdefault(int(row["order"]), []).append({
             "effect": sep.join(row["factors"]),
             "name": name,
             "factors": list(row["factors"]),
-            "ss": format_num(row["ss"]),
+            "ss": format_ss(row["ss"], noise),
             "dof": f"{format_df(row['df1'] * scale)}, {format_df(row['df2'] * scale)}",
-            "ms": format_num(row["ms"]),
-            "F": format_num(row["F"]),
-            "p": format_p(p),
-            "eta2": format_num(row["eta2_partial"]),
-            "nc": format_num(row["noncentrality"]),
-            "power": format_num(row["power"]),
+            "ms": format_ss(row["ms"], noise),
+            **effect_statistics(row, p, noise),
             "eps": format_num(eps, 3),
-            "posthoc": ph.summary if ph is not None else "",
+            "posthoc": posthoc_text(table.posthoc.get(name), not math.isnan(float(row["F"]))),
             "numbers": [None if math.isnan(float(row[c])) else float(row[c]) for c in EFFECT_COLUMNS],
             "p_reported": p,
             "significant": p < a,
@@ -141,8 +180,9 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
     strata = []
     if all_rows:
         for label, s in table.strata.iterrows():
-            strata.append({"effect": label, "ss": format_num(s["ss"]), "dof": format_df(s["df"]),
-                           "ms": format_num(s["ms"]), "raw": {"ss": float(s["ss"]), "df": float(s["df"]),
+            strata.append({"effect": label, "ss": format_ss(s["ss"], noise), "dof": format_df(s["df"]),
+                           "ms": format_ss(s["ms"], noise) if s["df"] > 0 else UNTESTABLE,
+                           "raw": {"ss": float(s["ss"]), "df": float(s["df"]),
                                                               "ms": float(s["ms"])}})
     show_posthoc = bool(table.posthoc)
     headers = list(HEADERS) + (["ε"] if correction != "none" else []) + (["post-hoc (Tukey)"] if show_posthoc else [])
@@ -179,4 +219,7 @@ def render(table: AnovaTable, fmt: str = "md", all_rows: bool = False, correctio
         raise AnalysisError(f"unknown table format {fmt!r}; choose one of {', '.join(FORMATS)}")
     ctx = table_context(table, all_rows=all_rows, correction=correction, alpha=alpha, caption=caption,
                         sep="*")
+    if fmt == "tex":   # pdflatex has no text glyph for ∞
+        for row in (r for section in ctx["sections"] for r in section["rows"]):
+            row.update({key: row[key].replace("∞", r"$\infty$") for key in ("F", "nc")})
     return _env().get_template(f"anova.{fmt}.j2").render(**ctx)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -128,3 +129,53 @@ def test_nothing_significant_says_so():
 
 def test_deterministic_output(table):
     assert render(table, "csv", all_rows=True) == render(table, "csv", all_rows=True)
+
+
+# -- walkthrough: rounding noise, untestable effects, Tukey without a difference -----------------------------
+
+def constant_sum_table():
+    """2AFC percentages (% capture + % synth = 100 in every cell; the walkthrough's 8 participants): VIEW,
+    BODY and BODY:VIEW are 0/0, and BODY:SOURCE:VIEW is 0 up to rounding noise."""
+    sixths = {"side": [(3, 2), (1, 2), (3, 5), (1, 1)], "oblique": [(4, 2), (3, 2), (2, 5), (2, 4)]}
+    rows = []
+    for view, people in sixths.items():
+        for s, (heavy, thin) in enumerate(people):
+            for body, x in (("Heavy", heavy * 100 / 6), ("Thin", thin * 100 / 6)):
+                rows += [(f"{view}{s}", view, body, "capture", x), (f"{view}{s}", view, body, "synth", 100 - x)]
+    d = pd.DataFrame(rows, columns=["participant", "VIEW", "BODY", "SOURCE", "percent"])
+    return anova(d, "percent", "participant", ["BODY", "SOURCE"], ["VIEW"])
+
+
+def test_rounding_noise_prints_as_zero_and_untestable_effects_as_dashes():
+    table = constant_sum_table()
+    assert 0 < abs(table.effects.loc["BODY:SOURCE:VIEW", "ss"]) < 1e-20     # noise, not an exact 0
+    assert 0 < table.strata.loc["Error", "ss"] < 1e-20
+    md = render(table, "md", all_rows=True)
+    assert not re.search(r"\de-\d", md)                                       # no 2.6e-29 anywhere
+    assert "| BODY*SOURCE*VIEW | 0.00 | 1, 6 | 0.00 | 0.00 | 1.00 | 0.00 | 0.00 | 0.05 |" in md
+    assert "| VIEW | 0.00 | 1, 6 | 0.00 | — | — | — | — | — |" in md
+    assert "| Error | 0.00 | 6 | 0.00 |" in md and "| Error(BODY) | 0.00 | 6 | 0.00 |" in md
+    rows = {r["effect"]: r for r in csv.DictReader(io.StringIO(render(table, "csv", all_rows=True)))}
+    assert float(rows["BODY:SOURCE:VIEW"]["ss"]) == table.effects.loc["BODY:SOURCE:VIEW", "ss"]   # CSV stays exact
+
+
+def test_error_term_without_variance_prints_infinite_f():
+    """Every subject shows the same BODY pattern: Error(BODY) is rounding noise, BODY's F is infinite."""
+    d = pd.DataFrame([(s, b, s * 0.7 + e) for s in range(6) for b, e in (("a", 0), ("b", 1), ("c", 3))],
+                     columns=["subject", "BODY", "y"])
+    table = anova(d, "y", "subject", ["BODY"])
+    assert "| BODY | 28.00 | 2, 10 | 14.00 | ∞ | <0.001 | 1.00 | ∞ | 1.00 |" in render(table, "md")
+    assert r"$\infty$" in render(table, "tex") and "∞" not in render(table, "tex")
+
+
+def test_tukey_without_a_significant_pair_says_ns(table):
+    md = render(table, "md", all_rows=True)
+    assert "n.s." not in md                     # Tukey ran only on the significant effects
+    tukey_all(table, effects=["SEX"])           # not significant: no pair differs
+    assert table.posthoc["SEX"].summary == ""   # the API keeps "" (DESIGN.md), the tables say n.s.
+    row = next(line for line in render(table, "md", all_rows=True).splitlines() if line.startswith("| SEX |"))
+    assert row.endswith("| n.s. |")
+    assert "n.s." in render(table, "html", all_rows=True) and "n.s." in render(table, "tex", all_rows=True)
+    untested = constant_sum_table()
+    tukey_all(untested, effects=["VIEW"])
+    assert "| VIEW | 0.00 | 1, 6 | 0.00 | — | — | — | — | — | — |" in render(untested, "md", all_rows=True)
