@@ -4,7 +4,8 @@
   motion of the same actor) starred, error bars ± standard error (the paper's Figure 4);
 - :func:`figure9`: percentage of trials each METHOD was chosen, by SEX and GAIT, ± SE (Figure 9);
 - :func:`interaction_plot`: means ± SE of any effect (x = first factor, lines = second, panels = the rest);
-- :func:`choice_bars`: votes or rank points per alternative (thesis designs).
+- :func:`choice_bars`: votes or rank points per alternative (thesis designs);
+- :func:`cell_means_plot`: means ± SE of every design cell, for designs no paper figure fits.
 
 Standard errors are across participants (SD / √n of the participants' cell values).
 """
@@ -175,6 +176,16 @@ def interaction_plot(frame: pd.DataFrame, dv: str, factors: list[str], design: D
     fig.suptitle(title or f"{' × '.join(factors)} (means ± SE)", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, stem)
+
+
+def cell_means_plot(frame: pd.DataFrame, dv: str, within: list[str], between: list[str], design: DesignInfo,
+                    stem: Path) -> list[Path]:
+    """Descriptive means ± SE of every cell: the within factors on x and as lines, one panel per between level
+    (and per level of any further within factor), so that every report shows its data even when the paper's
+    figures (which need body × motion or a chosen level) do not apply."""
+    panels = " × ".join(within[2:] + between)
+    title = f"Mean {dv} per cell (± SE across participants)" + (f"; panels: {panels}" if panels else "")
+    return interaction_plot(frame, dv, within + between, design, stem, title=title)
 
 
 def choice_bars(values: pd.DataFrame, column: str, design: DesignInfo, stem: Path, ylabel: str,

@@ -29,6 +29,7 @@ from analysis.io_files import check_output_folder, replace_directory
 from analysis.measures import (anova_input, binomial_first, chi2_votes, friedman, percent_chosen, rank_points,
                                vote_counts)
 from analysis.responses import ImportResult, import_responses
+from analysis.result_tables import ResultTable, render_results, write_results
 
 TABLE_FORMATS = ("md", "tex", "csv", "html", "json")
 MAX_INTERACTION_FIGURES = 8
@@ -157,6 +158,10 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     if design.response_type == "afc":
         figs.append((f"Figure 9 style: % of trials each {design.alternatives.name} was chosen",
                      figures.figure9(ai.data, design, out / "figures" / "figure9")))
+    if not figs:   # no paper figure fits this design: show the cell means all the same
+        figs.append((f"Mean {ai.dv} per {' × '.join(ai.within + ai.between)} (± SE)",
+                     figures.cell_means_plot(ai.data, ai.dv, ai.within, ai.between, design,
+                                             out / "figures" / "cell_means")))
     for effect in table.significant()[:MAX_INTERACTION_FIGURES]:
         factors = list(table.effects.loc[effect, "factors"])
         stem = out / "figures" / ("effect_" + "_".join(factors))
@@ -203,22 +208,42 @@ def _votes_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     per_cell.to_csv(out / "votes.csv", lineterminator="\n")
     tests = [{"cell": "all", **chi2_votes(overall.iloc[0].to_numpy())}]
     for cell, row in (per_cell.iterrows() if design.within else []):
-        tests.append({"cell": str(cell), **chi2_votes(row.to_numpy())})
+        tests.append({"cell": _cell_label(cell), **chi2_votes(row.to_numpy())})
     top = overall.iloc[0].idxmax()
     binom = binomial_first(int(overall.iloc[0][top]), int(overall.iloc[0].sum()), len(alt.levels), top)
-    tests_frame = pd.DataFrame(tests)
-    tests_frame.to_csv(out / "vote_tests.csv", index=False, lineterminator="\n")
+    pd.DataFrame(tests).to_csv(out / "vote_tests.csv", index=False, lineterminator="\n")
+    tables = _vote_tables(pd.concat([overall, per_cell]) if design.within else overall, tests, binom, top, design)
     shares = percent_chosen(data, design)
     figs = [(f"% of votes per {alt.name}", figures.choice_bars(shares, "percent", design,
                                                                 out / "figures" / "votes", "% of votes",
                                                                 100.0 / len(alt.levels)))]
-    html = _frame_html(overall, f"Votes per {alt.name} (all trials)") + \
-        _frame_html(tests_frame.round(4), "χ² goodness of fit against equal shares") + \
-        _frame_html(pd.DataFrame([binom]).round(4), f"Binomial test: {top} chosen more often than 1/{len(alt.levels)}")
     results = {"votes": overall.iloc[0].to_dict(), "chi2": tests, "binomial": binom}
-    return {"title": f"k-AFC votes per {alt.name}", "html": html, "figures": figs, "results": results,
+    return {"title": f"k-AFC votes per {alt.name}", "html": render_results(tables, "html"), "figures": figs,
+            "results": results,
             "note": "Vote counts are analysed with χ² goodness of fit (equal shares under chance).",
-            "files": ["votes.csv", "vote_tests.csv"]}
+            "files": write_results(tables, out / "vote_results") + ["votes.csv", "vote_tests.csv"]}
+
+
+def _cell_label(cell) -> str:
+    """``walk`` or, for several within factors, ``walk / 45``."""
+    return " / ".join(map(str, cell)) if isinstance(cell, tuple) else str(cell)
+
+
+def _vote_tables(counts: pd.DataFrame, tests: list[dict], binom: dict, top: str,
+                 design: DesignInfo) -> list[ResultTable]:
+    """The vote results as tables: counts and χ² per cell (all trials first), the binomial test of the top level."""
+    alt = design.alternatives
+    frame = counts.reset_index(drop=True).rename(columns=str)
+    frame.insert(0, "cell", [t["cell"] for t in tests])
+    frame = frame.assign(**{key: [t[name] for t in tests] for key, name in
+                            (("n", "n"), ("chi2", "statistic"), ("df", "df"), ("p", "p"))})
+    within = " × ".join(design.within)
+    per_cell = f", then per {within} cell" if within else ""
+    binomial = pd.DataFrame([{alt.name: top, "votes": binom["successes"], "n": binom["n"], "share": binom["statistic"],
+                              "p": binom["p"], "95% CI low": binom["ci_low"], "95% CI high": binom["ci_high"]}])
+    return [ResultTable("votes", f"Votes per {alt.name} level (all trials{per_cell}) and χ² goodness of fit "
+                                 f"against equal shares", frame),
+            ResultTable("binomial", f"Binomial test: {top} chosen more often than 1/{len(alt.levels)}", binomial)]
 
 
 def _ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
@@ -234,17 +259,29 @@ def _ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     totals = points.groupby(alt.name)["points"].sum().reindex(alt.levels).rename("total points").to_frame()
     totals["mean points"] = points.groupby(alt.name)["points"].mean().reindex(alt.levels)
     totals["ranked first"] = firsts
+    tables = _ranking_tables(totals, binomials, fried, design)
     figs = [(f"Mean rank points per {alt.name}", figures.choice_bars(points, "points", design,
                                                                       out / "figures" / "rank_points",
                                                                       "mean points", (len(alt.levels) + 1) / 2))]
-    html = _frame_html(totals.round(3), f"Rank points per {alt.name} ({len(alt.levels)} for first … 1 for last)") + \
-        _frame_html(pd.DataFrame([{k: v for k, v in fried.items() if k != 'mean_points'}]).round(4),
-                    "Friedman test over participants") + \
-        _frame_html(pd.DataFrame(binomials).round(4), "Binomial tests: ranked first more often than chance")
     results = {"totals": totals.reset_index().to_dict("records"), "friedman": fried, "binomial": binomials}
-    return {"title": f"Rankings of {alt.name}", "html": html, "figures": figs, "results": results,
-            "note": "Points: k for first place … 1 for last (the thesis scored 4/3/2/1).",
-            "files": ["rank_points.csv"]}
+    return {"title": f"Rankings of {alt.name}", "html": render_results(tables, "html"), "figures": figs,
+            "results": results, "note": "Points: k for first place … 1 for last (the thesis scored 4/3/2/1).",
+            "files": write_results(tables, out / "rank_results") + ["rank_points.csv"]}
+
+
+def _ranking_tables(totals: pd.DataFrame, binomials: list[dict], fried: dict, design: DesignInfo) -> list[ResultTable]:
+    """The ranking results as tables: points and 'ranked first' (binomial) per level, the Friedman test."""
+    alt = design.alternatives
+    k = len(alt.levels)
+    frame = totals.reset_index().assign(**{
+        "rankings": [b["n"] for b in binomials], "share first": [b["statistic"] for b in binomials],
+        "p": [b["p"] for b in binomials], "95% CI low": [b["ci_low"] for b in binomials],
+        "95% CI high": [b["ci_high"] for b in binomials]})
+    test = pd.DataFrame([{"test": fried["test"], "chi2": fried["statistic"], "df": fried["df"], "p": fried["p"],
+                          "participants": fried["n"]}])
+    return [ResultTable("rank_points", f"Rank points per {alt.name} ({k} for first … 1 for last) and binomial tests "
+                                       f"of 'ranked first' against chance (1/{k})", frame),
+            ResultTable("friedman", "Friedman test of the rank points, participants as blocks", test)]
 
 
 def _models_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict | None:

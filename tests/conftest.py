@@ -33,3 +33,22 @@ def run_cli(capsys):
         return code, out.out, out.err
 
     return run
+
+
+@pytest.fixture
+def jspsych_folder():
+    """Write simulated jsPsych files, one per participant plus a second copy of participant 1's (as a
+    lab's server collects them), into a new folder; return it."""
+    from analysis.io_writers import export_text
+    from analysis.model_spec import load_model
+    from analysis.simulate import simulate_responses
+
+    def write(design, folder: Path, participants: int, seed: int, prefix: str = "p") -> Path:
+        sim = simulate_responses(design, load_model(None, design), participants, seed=seed)
+        folder.mkdir()
+        for participant, rows in sim.groupby("participant"):
+            (folder / f"{prefix}{participant}.csv").write_text(export_text(rows, design, "jspsych"))
+        (folder / f"{prefix}1_again.csv").write_text(export_text(sim[sim["participant"] == 1], design, "jspsych"))
+        return folder
+
+    return write

@@ -153,20 +153,14 @@ def test_report_opens_in_chromium(reports, tmp_path):
     assert shot.stat().st_size > 50_000
 
 
-def test_analyze_a_folder_of_jspsych_files(reports, tmp_path):
+def test_analyze_a_folder_of_jspsych_files(reports, tmp_path, jspsych_folder):
     folder, _ = reports["exp2_com_vs_average"]
-    design = load_design(folder / "design")
-    sim = simulate_responses(design, load_model(None, design), 8, seed=4)
-    files = tmp_path / "responses"
-    files.mkdir()
-    for participant, rows in sim.groupby("participant"):
-        (files / f"shapemotion_exp2_{participant}.csv").write_text(export_text(rows, design, "jspsych"))
-    (files / "shapemotion_exp2_1_copy.csv").write_text(export_text(sim[sim["participant"] == 1], design, "jspsych"))
+    files = jspsych_folder(load_design(folder / "design"), tmp_path / "responses", 8, seed=4, prefix="shapemotion_exp2_")
     summary = analyze(folder / "design", files, tmp_path / "report")
     assert summary["import"]["participants"] == 8
     assert summary["import"]["excluded_by_reason"]["duplicate participant id"] == 80
     html = (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
-    assert "<th>file</th>" in html and "shapemotion_exp2_1_copy.csv" in html
+    assert "<th>file</th>" in html and "shapemotion_exp2_1_again.csv" in html
 
 
 def test_nothing_left_after_exclusions_is_a_user_error(run_cli, tmp_path):
@@ -176,3 +170,49 @@ def test_nothing_left_after_exclusions_is_a_user_error(run_cli, tmp_path):
     err = " ".join(err.split())   # the CLI wraps long messages
     assert code == 2 and "no participant is left" in err and "answer outside the scale" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_design_without_a_paper_figure_gets_a_cell_means_figure(tmp_path):
+    """SEX × GAIT × BODY without MOTION: Figure 4 does not apply and nothing is significant, yet the report
+    must show the data."""
+    design = load_design(DATA / "mini_likert")
+    sim = simulate_responses(design, load_model(None, design), 6, seed=2)
+    (tmp_path / "r.csv").write_text(export_text(sim, design, "long"))
+    summary = analyze(DATA / "mini_likert", tmp_path / "r.csv", tmp_path / "report", models=False)
+    assert summary["sections"][0]["results"]["significant"] == []
+    figures = tmp_path / "report" / "figures"
+    assert sorted(p.name for p in figures.iterdir()) == ["cell_means.pdf", "cell_means.png", "cell_means.svg"]
+    html = (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
+    assert html.count("<img src=\"data:image/png;base64,") == 1 and "Mean rating per GAIT × BODY × SEX" in html
+    svg = (figures / "cell_means.svg").read_text()
+    for text in ("SEX = F", "SEX = M", "GAIT", "BODY"):     # panels per between level, within on x and as lines
+        assert text in svg
+
+
+def test_vote_and_ranking_results_are_tables_in_every_format(reports):
+    for name, stem, tables in (("thesis_pointlight", "vote_results", ["votes", "binomial"]),
+                               ("thesis_validation", "rank_results", ["rank_points", "friedman"])):
+        folder, summary = reports[name]
+        report = folder / "report"
+        results = summary["sections"][0]["results"]
+        data = json.loads((report / f"{stem}.json").read_text())
+        assert [t["name"] for t in data["tables"]] == tables
+        frame = pd.read_csv(report / f"{stem}.csv")
+        assert list(frame["table"].unique()) == tables
+        md = (report / f"{stem}.md").read_text()
+        assert all(line.startswith(("**", "|")) for line in md.splitlines() if line)
+        assert "\\toprule" in (report / f"{stem}.tex").read_text()
+        assert "<table class=\"result\">" in (report / f"{stem}.html").read_text()
+        html = (report / "report.html").read_text(encoding="utf-8")
+        assert (report / f"{stem}.html").read_text() in html       # the report shows the same tables
+        if name == "thesis_validation":
+            friedman = data["tables"][1]["rows"][0]
+            assert friedman["chi2"] == results["friedman"]["statistic"] and friedman["p"] == results["friedman"]["p"]
+            points = frame[frame["table"] == "rank_points"].set_index("SOURCE")
+            for total, binomial in zip(results["totals"], results["binomial"]):
+                assert points.loc[total["SOURCE"], "total points"] == total["total points"]
+                assert points.loc[total["SOURCE"], "p"] == binomial["p"]
+        else:
+            votes = frame[frame["table"] == "votes"].set_index("cell")
+            assert votes.loc["all", "chi2"] == results["chi2"][0]["statistic"]
+            assert data["tables"][1]["rows"][0]["p"] == results["binomial"]["p"]

@@ -1,0 +1,126 @@
+"""Result tables of the vote and ranking analyses, in the formats of the ANOVA tables: md, tex, csv, html, json.
+
+A result is a list of :class:`ResultTable` (name, caption, a frame with exact numbers). Text formats (md,
+tex, html) print p as the paper does (``<0.001`` …) and other numbers with two decimals; CSV (a ``table``
+column, then every table's columns) and JSON (``{"tables": [{name, caption, columns, rows}]}``) carry the
+exact numbers.
+
+>>> t = ResultTable("votes", "Votes per level", pd.DataFrame({"level": ["a", "b"], "votes": [7, 3], "p": [0.2, 0.2]}))
+>>> print(render_results([t], "md"))
+**Votes per level**
+<BLANKLINE>
+| level | votes | p |
+|---|---:|---:|
+| a | 7 | 0.20 |
+| b | 3 | 0.20 |
+<BLANKLINE>
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis.errors import AnalysisError
+from analysis.tables import format_num, format_p, tex_escape
+
+FORMATS = ("md", "tex", "csv", "html", "json")
+
+
+@dataclass
+class ResultTable:
+    """One table of a result: ``name`` (CSV/JSON key), ``caption`` and one row per line of ``frame``."""
+
+    name: str
+    caption: str
+    frame: pd.DataFrame
+
+
+def format_cell(value, column: str) -> str:
+    """A value as text tables print it: p the paper's way, whole numbers as such, others with two decimals."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return format_p(float(value)) if column == "p" else format_num(float(value))
+    return str(value)
+
+
+def _text_rows(frame: pd.DataFrame) -> list[list[str]]:
+    return [[format_cell(v, c) for c, v in zip(frame.columns, row)] for row in frame.itertuples(index=False)]
+
+
+def _numeric(frame: pd.DataFrame) -> list[bool]:
+    return [pd.api.types.is_numeric_dtype(frame[c]) and not pd.api.types.is_bool_dtype(frame[c]) for c in frame]
+
+
+def _markdown(table: ResultTable) -> str:
+    align = "|".join("---:" if numeric else "---" for numeric in _numeric(table.frame))
+    lines = [f"**{table.caption}**", "", "| " + " | ".join(map(str, table.frame.columns)) + " |", f"|{align}|"]
+    lines += ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in _text_rows(table.frame)]
+    return "\n".join(lines) + "\n"
+
+
+def _latex(table: ResultTable) -> str:
+    spec = "".join("r" if numeric else "l" for numeric in _numeric(table.frame))
+    rows = [" & ".join(tex_escape(cell) for cell in row) + r" \\" for row in _text_rows(table.frame)]
+    return "\n".join([r"\begin{table}[htbp]", r"\centering", rf"\caption{{{tex_escape(table.caption)}}}",
+                      rf"\begin{{tabular}}{{{spec}}}", r"\toprule",
+                      " & ".join(tex_escape(c) for c in table.frame.columns) + r" \\", r"\midrule", *rows,
+                      r"\bottomrule", r"\end{tabular}", r"\end{table}"]) + "\n"
+
+
+def _html(table: ResultTable) -> str:
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in table.frame.columns)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(cell)}</td>" for cell in row) + "</tr>\n"
+                   for row in _text_rows(table.frame))
+    return (f"<figure class=\"table\"><figcaption>{html.escape(table.caption)}</figcaption>\n"
+            f"<table class=\"result\"><thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody></table></figure>\n")
+
+
+def _plain(value):
+    """JSON value of a cell: numpy scalars as Python numbers, NaN as null."""
+    value = value.item() if hasattr(value, "item") else value
+    return None if isinstance(value, float) and math.isnan(value) else value
+
+
+def _json(tables: list[ResultTable]) -> str:
+    out = [{"name": t.name, "caption": t.caption, "columns": [str(c) for c in t.frame.columns],
+            "rows": [{str(c): _plain(v) for c, v in zip(t.frame.columns, row)}
+                     for row in t.frame.itertuples(index=False)]}
+           for t in tables]
+    return json.dumps({"tables": out}, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
+
+
+def _csv(tables: list[ResultTable]) -> str:
+    # object columns: a count stays a whole number where another table leaves its column empty
+    frames = [t.frame.astype(object).assign(table=t.name)[["table", *t.frame.columns]] for t in tables]
+    return pd.concat(frames, ignore_index=True).to_csv(index=False, lineterminator="\n")
+
+
+def render_results(tables: list[ResultTable], fmt: str) -> str:
+    """All ``tables`` in one of :data:`FORMATS` (md, tex and html: one after the other)."""
+    if fmt not in FORMATS:
+        raise AnalysisError(f"unknown table format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    if fmt == "json":
+        return _json(tables)
+    if fmt == "csv":
+        return _csv(tables)
+    one = {"md": _markdown, "tex": _latex, "html": _html}[fmt]
+    return "\n".join(one(t) for t in tables)
+
+
+def write_results(tables: list[ResultTable], stem: Path) -> list[str]:
+    """Write ``stem.md``, ``.tex``, ``.csv``, ``.html`` and ``.json``; returns the file names."""
+    for fmt in FORMATS:
+        stem.with_suffix(f".{fmt}").write_text(render_results(tables, fmt), encoding="utf-8")
+    return [f"{stem.name}.{fmt}" for fmt in FORMATS]
