@@ -110,6 +110,23 @@ def read_csv(path: str):
     return data
 
 
+def check_no_practice_rows(data, path: str, used: list[str]) -> None:
+    """Refuse practice trials in the data (e.g. ``analyze``'s ``responses_tidy.csv``): their levels (BODY =
+    Prac) would enter the ANOVA as one more level of a factor. A ``practice`` column the user analyses as
+    a factor or measure is theirs to use."""
+    if "practice" not in data or "practice" in used:
+        return
+    flags = data["practice"].astype(str).str.strip().str.lower().isin(["true", "1", "1.0", "yes"])
+    if not flags.any():
+        return
+    lines = [str(i) for i in data.index[flags]]
+    shown = ", ".join(lines[:5]) + (f" … ({len(lines)} rows in all)" if len(lines) > 5 else "")
+    raise AnalysisError(f"{path}: {len(lines)} of {len(data)} rows are practice trials (column 'practice' is true "
+                        f"on CSV lines {shown}); the ANOVA would count their levels as conditions. Analyse the "
+                        f"report's cell_values.csv (test trials only, one value per participant and cell) or "
+                        f"drop the practice rows first")
+
+
 def _write(path: str, text: str) -> None:
     target = Path(path)
     if target.parent and not target.parent.exists():
@@ -130,6 +147,7 @@ def run_anova(args: argparse.Namespace) -> int:
             check_output_file(path, option, [args.data])
     abbreviations = parse_abbreviations(args.abbrev)
     data = read_csv(args.data)
+    check_no_practice_rows(data, args.data, [args.dv, args.subject, *args.within, *args.between])
     try:
         table = anova(data, dv=args.dv, subject=args.subject, within=args.within, between=args.between,
                       alpha=args.alpha)

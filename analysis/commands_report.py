@@ -1,6 +1,6 @@
 """CLI commands of the responses → results half. ``register(subparsers)`` adds them (see stimuli.cli).
 
-    shapemotion responses inspect FILE [--json]
+    shapemotion responses inspect FILE|FOLDER [--json] [--design DIR]
     shapemotion simulate DIR --participants N --seed S --format long|qualtrics|jspsych --out FILE [--model M.yaml]
     shapemotion power DIR --participants N [N …] --sims K [--model M.yaml] [--effect E --target 0.8]
     shapemotion analyze DIR --responses FILE --out REPORT [--no-models]
@@ -32,7 +32,7 @@ def _register_responses(subparsers) -> None:
     p = subparsers.add_parser("responses", help="inspect a survey response export (Qualtrics, jsPsych, long CSV)")
     sub = p.add_subparsers(dest="responses_command", metavar="ACTION")
     q = sub.add_parser("inspect", help="format detected, number of responses, columns with their question text")
-    q.add_argument("file", help="response export (CSV or JSON)")
+    q.add_argument("file", help="response export (CSV or JSON), or a folder of them (e.g. one jsPsych file each)")
     q.add_argument("--json", action="store_true", help="print JSON instead of text")
     q.add_argument("--design", metavar="DIR", help="also import against this design directory: counts, exclusions")
     q.set_defaults(func=run_inspect)
@@ -127,7 +127,7 @@ def run_power(args) -> int:
     from analysis.io_design import load_design
     from analysis.io_files import atomic_write_text, check_output_file
     from analysis.model_spec import load_model
-    from analysis.power import check_target, power_sweep, required_participants
+    from analysis.power import check_target, power_sweep, required_participants, required_text
     from analysis.simulate import check_seed
     # options first: a bad one must not cost a whole simulation before it is reported
     if args.csv:
@@ -141,14 +141,16 @@ def run_power(args) -> int:
         raise AnalysisError(f"--alpha: expected a number between 0 and 1, got {args.alpha}")
     table = power_sweep(design, model, args.participants, args.sims, args.seed, args.alpha,
                         progress=sys.stderr.isatty(), correction=args.correction)
-    answer = None
+    answer = text = None
     if args.effect:
         answer = required_participants(table, args.effect, args.target)
+        text = required_text(table, args.effect, args.target, answer)
     if args.csv:
         atomic_write_text(args.csv, table.to_csv(index=False, lineterminator="\n"))
     if args.json:
         print(json.dumps({"model": model.name, "rows": table.to_dict("records"),
-                          "effect": args.effect, "target": args.target, "required_participants": answer}, indent=2))
+                          "effect": args.effect, "target": args.target, "required_participants": answer,
+                          "answer": text}, indent=2))
         return 0
     cells = [f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(table["power"], table["ci_low"], table["ci_high"])]
     wide = table.assign(cell=cells).pivot(index="effect", columns="participants", values="cell")
@@ -159,10 +161,8 @@ def run_power(args) -> int:
     print(wide.to_string())
     rate = table.groupby("participants")["datasets_per_second"].first()
     print("throughput: " + ", ".join(f"N={n}: {r:.0f} data sets/s" for n, r in rate.items()))
-    if args.effect:
-        tried = ", ".join(str(n) for n in args.participants)
-        print(f"{args.effect}: {answer} participants reach power {args.target:g}" if answer else
-              f"{args.effect}: none of N = {tried} reaches power {args.target:g}; try larger N")
+    if text:
+        print(text)
     return 0
 
 
@@ -174,7 +174,8 @@ def _register_analyze(subparsers) -> None:
                                           "analysis, and write paper-style tables, figures and a self-contained "
                                           "report.html into REPORT (a folder).")
     p.add_argument("dir", help="design directory (design.json, conditions.csv, trials.csv)")
-    p.add_argument("--responses", required=True, metavar="FILE", help="response export (Qualtrics, jsPsych, long)")
+    p.add_argument("--responses", required=True, metavar="FILE", help="response export (Qualtrics, jsPsych, long), "
+                                                                       "or a folder of them")
     p.add_argument("--out", required=True, metavar="REPORT", help="output folder")
     p.add_argument("--no-models", action="store_true", help="skip the additional mixed/ordinal/GEE models")
     p.set_defaults(func=run_analyze)

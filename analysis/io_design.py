@@ -20,7 +20,9 @@ import pandas as pd
 
 from analysis.errors import AnalysisError
 
-MEASURE_OF_TYPE = {"likert": "mean_rating", "afc": "percent_chosen", "ranking": "rank_points"}
+# the measures each response type can give, its default first: a rating has no chosen level, a choice no
+# rating or ranking
+MEASURES_OF_TYPE = {"likert": ("mean_rating",), "afc": ("percent_chosen", "votes"), "ranking": ("rank_points",)}
 
 
 @dataclass(frozen=True)
@@ -151,11 +153,11 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
     factors = [_factor(f, where) for f in _need(meta, "factors", where, protocol)]
     response = _mapping(meta, "response", where) or _mapping(protocol, "response", where, "protocol.")
     rtype = response.get("type")
-    if rtype not in MEASURE_OF_TYPE:
+    if rtype not in MEASURES_OF_TYPE:
         raise AnalysisError(f"{where}: response.type must be likert, afc or ranking, got {rtype!r}")
     labels = [str(x) for x in response.get("labels") or []]
     analysis = _mapping(protocol, "analysis", where, "protocol.")
-    measure = meta.get("dependent_measure") or analysis.get("dependent_measure") or MEASURE_OF_TYPE[rtype]
+    measure = _measure(meta, analysis, rtype, where)
     chosen = meta.get("chosen_factor") or next((f.name for f in factors if f.role == "alternatives"), None)
     if rtype in ("afc", "ranking") and chosen is None:
         raise AnalysisError(f"{where}: a {rtype} design needs chosen_factor or a factor with role 'alternatives'")
@@ -176,6 +178,22 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
                       alpha=float((_mapping(meta, "analysis", where) or analysis).get("alpha", 0.05)),
                       position_labels=[str(x) for x in response.get("position_labels") or []],
                       posthoc=str((_mapping(meta, "analysis", where) or analysis).get("posthoc", "tukey")))
+
+
+def _measure(meta: dict, analysis: dict, rtype: str, where: Path) -> str:
+    """The dependent measure (default: the response type's own), refused when the responses cannot give it."""
+    if meta.get("dependent_measure"):
+        field_name, measure = "dependent_measure", meta["dependent_measure"]
+    elif analysis.get("dependent_measure"):
+        field_name, measure = "protocol.analysis.dependent_measure", analysis["dependent_measure"]
+    else:
+        return MEASURES_OF_TYPE[rtype][0]
+    allowed = MEASURES_OF_TYPE[rtype]
+    if measure not in allowed:
+        raise AnalysisError(f"{where}: field {field_name!r} is {measure!r}, but response.type {rtype!r} allows only "
+                            f"{' or '.join(allowed)}; fix the protocol's analysis.dependent_measure and run "
+                            f"`shapemotion design` again")
+    return measure
 
 
 def _factor(raw: dict, where: Path) -> FactorInfo:

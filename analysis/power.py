@@ -182,6 +182,29 @@ def required_participants(sweep: pd.DataFrame, effect: str, target: float = 0.8)
     return int(hits["participants"].min()) if not hits.empty else None
 
 
+def required_text(sweep: pd.DataFrame, effect: str, target: float, required: int | None) -> str:
+    """The sweep's answer in words, bounded by the N tried: at the smallest N the power may already be reached
+    with fewer participants, and beyond the largest N nothing is known.
+
+    >>> sweep = pd.DataFrame({"participants": [8, 16], "effect": ["A", "A"], "power": [0.5, 0.9]})
+    >>> required_text(sweep, "A", 0.8, 16)
+    'A: power 0.8 needs more than 8 and at most 16 participants (N = 16 reaches 0.900; N = 8: 0.500)'
+    """
+    rows = sweep[sweep["effect"].map(_canonical) == _canonical(effect)].sort_values("participants")
+    power = dict(zip(rows["participants"], rows["power"]))
+    tried = list(power)
+    if required is None:
+        largest = tried[-1]
+        return (f"{effect}: none of N = {', '.join(map(str, tried))} reaches power {target:g} (largest N = {largest}: "
+                f"{power[largest]:.3f}); more than {largest} participants are needed, try larger N")
+    if required == tried[0]:
+        return (f"{effect}: power {target:g} is already reached at the smallest N tried ({required}: "
+                f"{power[required]:.3f}), so at most {required} participants are needed; try smaller N to know more")
+    below = tried[tried.index(required) - 1]
+    return (f"{effect}: power {target:g} needs more than {below} and at most {required} participants "
+            f"(N = {required} reaches {power[required]:.3f}; N = {below}: {power[below]:.3f})")
+
+
 def check_target(target: float) -> None:
     """Power is a probability: a target of 0 is always met and one of 1 or more never is."""
     if not 0 < target < 1:

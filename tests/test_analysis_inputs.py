@@ -415,3 +415,61 @@ def test_model_yaml_with_a_duplicate_key_is_refused(designs, tmp_path):
                     "thresholds: [-1.5, -0.5, 0.5, 1.5]\n")
     with pytest.raises(AnalysisError, match=r"m\.yaml: line 4: key 'Hi2' appears twice"):
         load_model(path, load_design(designs["exp1_shape_motion"]))
+
+
+# -- 13. user walkthrough ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("where, field", [("top", "dependent_measure"),
+                                          ("protocol", "protocol.analysis.dependent_measure")])
+def test_design_json_with_a_measure_the_responses_cannot_give_is_refused(designs, run_cli, tmp_path, where, field):
+    """A Likert design asking for percent_chosen used to crash with KeyError 'chosen' deep in the measures."""
+    folder = copy_design(designs, tmp_path)
+    meta = json.loads((folder / "design.json").read_text())
+    answers = responses(folder, tmp_path / "r.csv", "long", participants=2)
+    if where == "top":
+        meta["dependent_measure"] = "percent_chosen"
+    else:
+        del meta["dependent_measure"]
+        meta["protocol"]["analysis"]["dependent_measure"] = "percent_chosen"
+    (folder / "design.json").write_text(json.dumps(meta))
+    code, _, err = run_cli("analyze", folder, "--responses", answers, "--out", tmp_path / "out")
+    assert code == 2 and "Traceback" not in err and not (tmp_path / "out").exists()
+    assert says(err, f"design.json: field '{field}' is 'percent_chosen'", "response.type 'likert' allows only "
+                                                                          "mean_rating")
+
+
+def test_anova_refuses_practice_rows(anova_csv, run_cli, tmp_path):
+    """responses_tidy.csv holds the practice trials: their BODY level must not become one more condition."""
+    lines = anova_csv.read_text().splitlines()
+    practice = [f"{s},walk,Prac,3,True" for s in range(1, 5)]
+    test_rows = [line + ",False" for line in lines[1:]]
+    anova_csv.write_text("\n".join([lines[0] + ",practice", *test_rows, *practice]) + "\n")
+    code, out, err = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY",
+                             "--out", tmp_path / "table.md")
+    assert code == 2 and out == "" and not (tmp_path / "table.md").exists()
+    assert says(err, "d.csv: 4 of 20 rows are practice trials", "CSV lines 18, 19, 20, 21",
+                "cell_values.csv", "drop the practice rows")
+    anova_csv.write_text("\n".join(anova_csv.read_text().splitlines()[:17]) + "\n")   # test trials only: fine
+    code, out, _ = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY",
+                           "--all")
+    assert code == 0 and "Prac" not in out and "| BODY |" in out
+
+
+def test_inspect_a_folder_of_jspsych_files(designs, run_cli, tmp_path, jspsych_folder):
+    """analyze --responses accepts a folder of per-participant files; inspect reads it the same way."""
+    folder = jspsych_folder(load_design(designs["exp2_com_vs_average"]), tmp_path / "responses", 3, seed=4)
+    (folder / "notes.txt").write_text("not a response file")
+    single = json.loads(run_cli("responses", "inspect", folder / "p1.csv", "--json")[1])
+    code, out, _ = run_cli("responses", "inspect", folder, "--json")
+    info = json.loads(out)
+    assert code == 0 and [f["file"] for f in info["files"]] == ["p1.csv", "p1_again.csv", "p2.csv", "p3.csv"]
+    assert info["rows"] == 4 * single["rows"] and info["responses"] == 4 * single["responses"]
+    assert info["participants"] == 3                      # participant 1's second file is the same person
+    assert [c["name"] for c in info["columns"]] == [c["name"] for c in single["columns"]]
+    code, out, _ = run_cli("responses", "inspect", folder, "--design", designs["exp2_com_vs_average"])
+    assert code == 0 and says(out, f"folder: {folder}", "files: 4", f"p2.csv: jspsych-csv; rows {single['rows']}",
+                              "participants: 3", "3 participants")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, _, err = run_cli("responses", "inspect", empty)
+    assert code == 2 and says(err, "the folder holds no .csv or .json response file")

@@ -5,13 +5,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from scipy import stats
 
 from analysis.errors import AnalysisError
 from analysis.io_design import load_design
 from analysis.model_spec import load_model, null_model
-from analysis.power import clopper_pearson, power_analysis, power_sweep, required_participants
+from analysis.power import clopper_pearson, power_analysis, power_sweep, required_participants, required_text
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,6 +71,17 @@ def test_sweep_answers_how_many_participants(designs):
         required_participants(sweep, "BODY:COLOUR")
 
 
+def test_answer_is_bounded_by_the_participants_tried():
+    """The smallest N tried only bounds the answer from above, the largest tried only from below."""
+    sweep = pd.DataFrame({"participants": [16, 8, 24], "effect": ["BODY:MOTION"] * 3, "power": [0.79, 0.42, 0.95]})
+    assert required_text(sweep, "MOTION*BODY", 0.8, required_participants(sweep, "MOTION*BODY", 0.8)) == (
+        "MOTION*BODY: power 0.8 needs more than 16 and at most 24 participants (N = 24 reaches 0.950; N = 16: 0.790)")
+    assert required_text(sweep, "BODY:MOTION", 0.4, 8).startswith(
+        "BODY:MOTION: power 0.4 is already reached at the smallest N tried (8: 0.420), so at most 8 participants")
+    assert required_text(sweep, "BODY:MOTION", 0.99, None).startswith(
+        "BODY:MOTION: none of N = 8, 16, 24 reaches power 0.99 (largest N = 24: 0.950); more than 24 participants")
+
+
 def test_vote_and_ranking_designs_use_their_tests(designs):
     votes = designs["thesis_pointlight"]
     assert power_analysis(votes, null_model(votes), 16, 600, 1).table["power"].iloc[0] < 0.085
@@ -91,7 +103,8 @@ def test_cli_power_table_json_and_errors(designs, run_cli, tmp_path):
     folder = str(designs["exp2_com_vs_average"].directory)
     code, out, _ = run_cli("power", folder, "--participants", "8", "16", "--sims", "200", "--effect", "SEX:METHOD")
     assert code == 0
-    assert "N=8" in out and "N=16" in out and "SEX:METHOD: 8 participants reach power 0.8" in out
+    assert "N=8" in out and "N=16" in out
+    assert "SEX:METHOD: power 0.8 is already reached at the smallest N tried (8: " in out   # not "8 reach it"
     assert "data sets/s" in out
     code, out, _ = run_cli("power", folder, "--participants", "8", "--sims", "100", "--json",
                            "--csv", str(tmp_path / "p.csv"))

@@ -23,7 +23,7 @@ from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import TagIndex
 from analysis.responses.qualtrics import qualtrics_answers
-from analysis.responses.read import RawFile, read_response_file
+from analysis.responses.read import RawFile, read_response_file, response_files
 from analysis.responses.tidy import assemble
 from analysis.responses.trialwise import trialwise_answers
 
@@ -129,10 +129,7 @@ def import_folder(folder: Path, design: DesignInfo) -> ImportResult:
     A participant found in several files is kept from the first file (in name order); the later files'
     rows of that participant are excluded as duplicates.
     """
-    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in (".csv", ".json"))
-    if not files:
-        raise AnalysisError(f"{folder}: the folder holds no .csv or .json response file")
-    results = [import_responses(f, design) for f in files]
+    results = [import_responses(f, design) for f in response_files(folder)]
     data = pd.concat([r.data.assign(file=r.path.name) for r in results], ignore_index=True)
     exclusions = pd.concat([r.exclusions.assign(file=r.path.name) for r in results], ignore_index=True)
     owner = data.drop_duplicates("participant")[["participant", "file"]].set_index("participant")["file"]

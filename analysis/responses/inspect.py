@@ -13,11 +13,40 @@ from __future__ import annotations
 from pathlib import Path
 
 from analysis.responses.qualtrics import UNFINISHED, classify_columns
-from analysis.responses.read import _participant_column, read_response_file
+from analysis.responses.read import _participant_column, read_response_file, response_files
 
 
 def inspect_file(path: str | Path) -> dict:
-    """Format, number of responses (data rows), participants and every column with its question text."""
+    """Format, number of responses (data rows), participants and every column with its question text.
+
+    A folder is read as ``analyze`` reads it (:func:`inspect_folder`)."""
+    if Path(path).is_dir():
+        return inspect_folder(Path(path))
+    return _inspect_one(Path(path))[0]
+
+
+def inspect_folder(folder: Path) -> dict:
+    """Every response file of a folder: per-file counts (``files``), totals, and the columns of all files.
+
+    Participants are counted once across files, as the import keeps a participant found in several files once.
+    """
+    parts = [_inspect_one(f) for f in response_files(folder)]
+    infos = [info for info, _ in parts]
+    info = {"file": str(folder), "format": "+".join(sorted({i["format"] for i in infos})),
+            "rows": sum(i["rows"] for i in infos), "responses": sum(i["responses"] for i in infos),
+            "participants": len(set().union(*(ids for _, ids in parts))),
+            "files": [{k: v for k, v in i.items() if k != "columns"} | {"file": Path(i["file"]).name} for i in infos]}
+    if any("unfinished" in i for i in infos):
+        info["unfinished"] = sum(i.get("unfinished", 0) for i in infos)
+    columns: dict[str, dict] = {}
+    for i in infos:
+        for c in i["columns"]:
+            columns.setdefault(c["name"], c | {"files": 0})["files"] += 1
+    return info | {"columns": list(columns.values())}
+
+
+def _inspect_one(path: Path) -> tuple[dict, set]:
+    """:func:`inspect_file` of one file, and its participants (ids, or the file's rows where ids are unknown)."""
     raw = read_response_file(path)
     info = {"file": str(path), "format": raw.format, "rows": raw.n_rows}
     if raw.format.startswith("qualtrics"):
@@ -35,27 +64,35 @@ def inspect_file(path: str | Path) -> dict:
                               "question_text": raw.question_text[i] if i < len(raw.question_text) else "",
                               "import_id": raw.import_ids[i].get("ImportId", "") if raw.import_ids else ""}
                              for i, c in enumerate(raw.columns)]}
-        return info
+        return info, {(str(path), n) for n in raw.row_numbers}   # one respondent per row
     rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
     answers = [r for r in rows if str(r.get("stimulus_id") or "").strip()]
     pid = _participant_column(raw.columns)
     # without a participant column the file is one participant's data (jsPsych saves one file each)
-    people = len({str(r.get(pid)) for r in answers}) if pid else int(bool(answers))
-    info |= {"responses": len(answers), "participants": people,
+    people = {str(r.get(pid)) for r in answers} if pid else ({str(path)} if answers else set())
+    info |= {"responses": len(answers), "participants": len(people),
              "columns": [{"name": c, "kind": "column", "question_text": "", "import_id": ""} for c in raw.columns]}
-    return info
+    return info, people
 
 
 def describe_text(info: dict) -> str:
     """The human-readable form of :func:`inspect_file`."""
-    lines = [f"file: {info['file']}", f"format: {info['format']}", f"rows: {info['rows']}",
-             f"responses: {info['responses']}", f"participants: {info['participants']}"]
+    lines = [f"{'folder' if 'files' in info else 'file'}: {info['file']}"]
+    if "files" in info:
+        lines.append(f"files: {len(info['files'])}")
+        lines += [f"  {f['file']}: {f['format']}; rows {f['rows']}, responses {f['responses']}, "
+                  f"participants {f['participants']}" for f in info["files"]]
+        lines.append("total:")
+    lines += [f"format: {info['format']}", f"rows: {info['rows']}", f"responses: {info['responses']}",
+              f"participants: {info['participants']}"]
     if "unfinished" in info:
         lines.append(f"unfinished (Finished = 0): {info['unfinished']}")
     lines.append("columns:")
     for c in info["columns"]:
         text = f" — {c['question_text'][:70]}" if c["question_text"] and c["question_text"] != c["name"] else ""
-        lines.append(f"  {c['name']} [{c['kind']}]{text}")
+        only = f" (in {c['files']} of {len(info['files'])} files)" if c.get("files", 0) < len(info.get("files", [])) \
+            else ""
+        lines.append(f"  {c['name']} [{c['kind']}]{text}{only}")
     if "import" in info:
         imp = info["import"]
         reasons = ", ".join(f"{k}: {v}" for k, v in imp["excluded_by_reason"].items()) or "none"

@@ -55,6 +55,14 @@ class RawFile:
         return len(self.rows)
 
 
+def response_files(folder: Path) -> list[Path]:
+    """The response files of a folder (``*.csv``, ``*.json``; e.g. one jsPsych file per participant), by name."""
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in (".csv", ".json"))
+    if not files:
+        raise AnalysisError(f"{folder}: the folder holds no .csv or .json response file")
+    return files
+
+
 def read_response_file(path: str | Path) -> RawFile:
     """Detect the format of ``path`` and split it into header and records."""
     path = Path(path)
