@@ -8,7 +8,6 @@ orthographic camera scale, so heights compare across bodies; a floor line marks 
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 
 import numpy as np
@@ -20,17 +19,18 @@ SEX_COLOURS = {"F": (0.78, 0.50, 0.45, 1.0), "M": (0.42, 0.52, 0.72, 1.0)}
 
 @functools.lru_cache(maxsize=1)
 def _renderer():
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    import pyrender
+    from stimuli.render.gl import pyrender_module
 
-    return pyrender.OffscreenRenderer(TILE_W, TILE_H)
+    return pyrender_module().OffscreenRenderer(TILE_W, TILE_H)
 
 
 def render_tile(body, yaw_deg: float = 0.0) -> np.ndarray:
     """RGB image (TILE_H, TILE_W, 3) of a body's rest mesh seen from the front (yaw 0) or rotated."""
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    import pyrender
     import trimesh
+
+    from stimuli.render.gl import ordered_scene, pyrender_module
+
+    pyrender = pyrender_module()
 
     yaw = np.deg2rad(yaw_deg)
     turn = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
@@ -38,7 +38,7 @@ def render_tile(body, yaw_deg: float = 0.0) -> np.ndarray:
     mesh = trimesh.Trimesh(vertices, body.faces, process=False)
     material = pyrender.MetallicRoughnessMaterial(baseColorFactor=SEX_COLOURS.get(body.sex, (0.7, 0.7, 0.7, 1.0)),
                                                   metallicFactor=0.0, roughnessFactor=0.8)
-    scene = pyrender.Scene(ambient_light=[0.25, 0.25, 0.25], bg_color=[1.0, 1.0, 1.0, 1.0])
+    scene = ordered_scene(ambient_light=[0.25, 0.25, 0.25], bg_color=[1.0, 1.0, 1.0, 1.0])  # lights in a fixed order
     scene.add(pyrender.Mesh.from_trimesh(mesh, material=material, smooth=True))
     camera = pyrender.OrthographicCamera(xmag=VIEW_HEIGHT_M / 2 * TILE_W / TILE_H, ymag=VIEW_HEIGHT_M / 2)
     pose = np.eye(4)

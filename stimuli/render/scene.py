@@ -12,7 +12,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.render.camera import View, look_at
-from stimuli.render.gl import pyrender_module, renderer
+from stimuli.render.gl import ordered_scene, pyrender_module, renderer
 
 BODY_GREY = (0.62, 0.62, 0.62)
 FLOOR_LIGHT, FLOOR_DARK = (236, 236, 236), (200, 200, 200)
@@ -107,7 +107,7 @@ class Stage:
     def __init__(self, view: View, background=(1.0, 1.0, 1.0), lit: bool = True):
         pyrender = pyrender_module()
         self.view = view
-        self.scene = pyrender.Scene(bg_color=(*background, 1.0), ambient_light=(0.28, 0.28, 0.28) if lit else (0, 0, 0))
+        self.scene = ordered_scene(bg_color=(*background, 1.0), ambient_light=(0.28, 0.28, 0.28) if lit else (0, 0, 0))
         # An intrinsics camera can render any sub-rectangle of the image (see ``render``).
         self.focal = 0.5 * view.height / np.tan(0.5 * view.yfov)
         self.camera = pyrender.IntrinsicsCamera(fx=self.focal, fy=self.focal, cx=view.width / 2, cy=view.height / 2,
