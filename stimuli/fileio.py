@@ -100,3 +100,19 @@ def _check_parent_folder(path: Path, option: str) -> None:
             if not os.access(parent, os.W_OK | os.X_OK):
                 raise StimuliError(f"{option} {path}: the folder {parent} is not writable")
             return
+
+
+# Matplotlib stamps the time into SVG (dc:date), PDF (CreationDate) and PNG (Software) files and draws
+# SVG element ids at random: without these the same figure gave different bytes on every run.
+FIGURE_METADATA = {".png": {"Software": None}, ".svg": {"Date": None}, ".pdf": {"CreationDate": None}}
+
+
+def save_figure(fig, path: str | Path, dpi: float = 110) -> Path:
+    """Write a matplotlib figure so that the same figure gives the same bytes (no dates, fixed SVG ids)."""
+    import matplotlib
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with matplotlib.rc_context({"svg.hashsalt": "shapemotion"}):
+        fig.savefig(path, dpi=dpi, metadata=FIGURE_METADATA.get(path.suffix.lower()))
+    return path

@@ -156,6 +156,8 @@ def test_fig7_curves_and_plot(ref_result, walk, tmp_path):
     assert 55 < max(norm["knee_flexion_deg"]["mean"]) < 70
     paths = plot_fig7({"ref": dict(c, bmi=24.4, sex="F")}, tmp_path / "fig7")
     assert all(p.stat().st_size > 1000 for p in paths)
+    again = plot_fig7({"ref": dict(c, bmi=24.4, sex="F")}, tmp_path / "again" / "fig7")
+    assert [p.read_bytes() for p in again] == [p.read_bytes() for p in paths]   # no dates, fixed SVG ids
 
 
 def test_cli_retarget_writes_motion_and_report(run_cli, walk, tmp_path):

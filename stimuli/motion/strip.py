@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stimuli.fileio import save_figure
 from stimuli.motion.markers import MARKERS, marker_trajectories
 
 BONES = [("hips", "l_upper_leg"), ("hips", "r_upper_leg"), ("l_upper_leg", "l_knee"), ("r_upper_leg", "r_knee"),
@@ -51,9 +52,7 @@ def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, points
             ax.set_title(f"{label} {100 * (f % max(motion.n_frames // cycles, 1)) / max(motion.n_frames // cycles, 1):.0f}%",
                          fontsize=6)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    path = save_figure(fig, path)
     plt.close(fig)
     return path
 

@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from stimuli.fileio import save_figure
+
 GRID = np.linspace(0.0, 1.0, 101)
 # Low-pass cutoff for joint moments (Hz): the usual 6–10 Hz of gait kinetics.
 MOMENT_CUTOFF_HZ = 8.0
@@ -217,12 +219,6 @@ def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normativ
         ax.set_xlim(0, 100)
     if title:
         fig.suptitle(title)
-    paths = []
-    out_stem = Path(out_stem)
-    out_stem.parent.mkdir(parents=True, exist_ok=True)
-    for ext in ("png", "svg"):
-        path = out_stem.with_suffix(f".{ext}")
-        fig.savefig(path, dpi=110)
-        paths.append(path)
+    paths = [save_figure(fig, Path(out_stem).with_suffix(f".{ext}")) for ext in ("png", "svg")]
     plt.close(fig)
     return paths
