@@ -145,10 +145,12 @@ def run_power(args) -> int:
     if args.effect:
         answer = required_participants(table, args.effect, args.target)
         text = required_text(table, args.effect, args.target, answer)
+    # files carry no wall-clock figures: the same design, model and seed give the same bytes
+    reproducible = table.drop(columns="datasets_per_second")
     if args.csv:
-        atomic_write_text(args.csv, table.to_csv(index=False, lineterminator="\n"))
+        atomic_write_text(args.csv, reproducible.to_csv(index=False, lineterminator="\n"))
     if args.json:
-        print(json.dumps({"model": model.name, "rows": table.to_dict("records"),
+        print(json.dumps({"model": model.name, "rows": reproducible.to_dict("records"),
                           "effect": args.effect, "target": args.target, "required_participants": answer,
                           "answer": text}, indent=2))
         return 0

@@ -111,6 +111,8 @@ def test_cli_power_table_json_and_errors(designs, run_cli, tmp_path):
     data = json.loads(out)
     assert code == 0 and {r["effect"] for r in data["rows"]} >= {"METHOD", "SEX:METHOD"}
     assert (tmp_path / "p.csv").read_text().startswith("participants,effect,rejections")
+    again = run_cli("power", folder, "--participants", "8", "--sims", "100", "--json", "--csv", str(tmp_path / "q.csv"))
+    assert again[1] == out and (tmp_path / "q.csv").read_bytes() == (tmp_path / "p.csv").read_bytes()  # no timings
     code, _, err = run_cli("power", folder, "--participants", "8", "--sims", "0")
     assert code == 2 and "--sims" in err
     code, _, err = run_cli("power", str(tmp_path / "missing"), "--participants", "8", "--sims", "10")
