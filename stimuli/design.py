@@ -12,7 +12,11 @@ Counterbalancing rules (all seeded, so the same protocol + seed gives the same l
 - between-subject groups: every cell of the between factors gets the same number of participants;
 - block order: ``counterbalanced`` uses the rows of a Williams Latin square (each block equally often
   in each position and, for an even number of blocks, after each other block), dealt out evenly
-  within each between group; ``random`` shuffles per participant; ``fixed`` keeps the declared order;
+  within each between group, the rotation going on from one group to the next so that a group size
+  the orders do not divide still gives totals as even as possible (``Design.notes`` then says so);
+  ``random`` shuffles per participant; ``fixed`` keeps the declared order;
+- practice: ``practice.per_block`` clips drawn from the block's practice pool, whole shuffled copies of
+  the pool first when it asks for more (copies numbered repetition 2, 3, …);
 - side-by-side/row placement of an ``alternatives`` factor: ``within`` shows every arrangement to
   everyone; ``between`` rotates arrangements over participants so every position is balanced;
 - trial order within a block is random with no stimulus twice in a row (when that is possible).
@@ -74,6 +78,7 @@ class Design:
     trials: list[Trial]
     blocks: list[str]                                   # block labels in declared order
     block_orders: dict[int, list[str]] = field(default_factory=dict)  # participant → block labels
+    notes: list[str] = field(default_factory=list)      # what the user should know (e.g. unbalanced orders)
 
     def stimulus(self, stimulus_id: str) -> Stimulus:
         return self._by_id()[stimulus_id]
@@ -138,6 +143,18 @@ def practice_stimuli(protocol: Protocol) -> list[Stimulus]:
         return []
     lists = [protocol.practice.levels.get(f.name, f.levels) for f in protocol.factors if f.role != "alternatives"]
     return _stimuli_for(protocol, lists, "practice")
+
+
+def practice_pool(protocol: Protocol) -> int:
+    """Distinct practice clips one block offers (the same for every block and between group).
+
+    >>> from stimuli.protocol import load_protocol
+    >>> practice_pool(load_protocol("protocols/exp1_shape_motion.yaml"))   # BODY P1, P2 × MOTION P1, P2
+    4
+    """
+    between = protocol.factors_with_role("between")
+    scope = {f.name: f.levels[0] for f in between} | block_cells(protocol)[0]
+    return sum(_matches(s, scope) for s in practice_stimuli(protocol))
 
 
 def familiarization_stimuli(protocol: Protocol) -> list[Stimulus]:
@@ -213,9 +230,11 @@ def _feasible(counts: Counter, chosen: str) -> bool:
     return all(c <= (n + 1) // 2 for c in rest.values()) and rest[chosen] <= n // 2
 
 
-def _balanced_labels(n: int, k: int, rng: np.random.Generator) -> list[int]:
-    """``n`` labels from ``range(k)`` as evenly as possible, in random order."""
-    return [int(x) for x in rng.permutation([i % k for i in range(n)])]
+def _balanced_labels(n: int, k: int, rng: np.random.Generator, start: int = 0) -> list[int]:
+    """``n`` labels from ``range(k)`` as evenly as possible, in random order; the labels dealt are
+    ``start``, ``start + 1``, … (mod k), so that groups dealt one after the other with ``start`` = the
+    number dealt before them share the surplus out evenly over all of them."""
+    return [int(x) for x in rng.permutation([(start + i) % k for i in range(n)])]
 
 
 # -- participants -------------------------------------------------------------------------------
@@ -242,9 +261,11 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     group_of = _balanced_labels(n, len(group_cells), rng)
     trials: list[Trial] = []
     block_orders: dict[int, list[str]] = {}
+    dealt = 0  # block orders dealt to the groups before this one: the rotation goes on from there
     for g, groups in enumerate(group_cells):
         members = [p for p in range(n) if group_of[p] == g]
-        order_of = _balanced_labels(len(members), len(orders), rng) if orders else [0] * len(members)
+        order_of = _balanced_labels(len(members), len(orders), rng, dealt) if orders else [0] * len(members)
+        dealt += len(members)
         for rank, p in enumerate(members):
             if protocol.blocks.order == "random":
                 order = [int(i) for i in rng.permutation(len(blocks))]
@@ -254,8 +275,31 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
             trials += _participant_trials(protocol, p + 1, rank, groups, [blocks[i] for i in order],
                                           tests, practices, familiar, rng)
     trials.sort(key=lambda t: (t.participant, t.trial))
+    block_orders = dict(sorted(block_orders.items()))
+    order_labels = [[block_label(blocks[i]) for i in order] for order in orders or []]
+    notes = order_balance_notes(group_cells, group_of, block_orders, order_labels)
     return Design(protocol, n, seed, tests + practices + familiar, trials,
-                  [block_label(b) for b in blocks], dict(sorted(block_orders.items())))
+                  [block_label(b) for b in blocks], block_orders, notes)
+
+
+def order_balance_notes(group_cells: list[dict], group_of: list[int], block_orders: dict[int, list[str]],
+                        order_labels: list[list[str]]) -> list[str]:
+    """A note, with the counts, when the counterbalanced block orders (``order_labels``; none for
+    ``random`` or ``fixed``) cannot be dealt equally often within each between group."""
+    k = len(order_labels)
+    if k < 2 or all(size % k == 0 for size in Counter(group_of).values()):
+        return []
+    counts = {" → ".join(order): Counter() for order in order_labels}
+    for participant, order in block_orders.items():
+        counts[" → ".join(order)][group_of[participant - 1]] += 1
+    if len(group_cells) > 1:
+        rows = "; ".join(f"{order}: " + ", ".join(f"{block_label(cell)} {dealt[g]}" for g, cell in enumerate(group_cells))
+                         + f" (total {sum(dealt.values())})" for order, dealt in counts.items())
+    else:
+        rows = "; ".join(f"{order}: {sum(dealt.values())}" for order, dealt in counts.items())
+    within = " within each between group" if len(group_cells) > 1 else ""
+    return [f"blocks.order: {len(group_of)} participants cannot see the {k} counterbalanced block orders equally "
+            f"often{within}; orders dealt: {rows}. A multiple of {k * len(group_cells)} participants balances them"]
 
 
 def _matches(stimulus: Stimulus, cell: dict[str, str]) -> bool:
@@ -281,19 +325,31 @@ def _participant_trials(protocol, participant, rank, groups, blocks, tests, prac
         pool = [s.stimulus_id for s in practices if _matches(s, scope)]
         if protocol.practice.per_block and pool:
             chosen = [pool[i] for i in _practice_pick(len(pool), protocol.practice.per_block, rng)]
-            for sid in shuffle_no_repeats(chosen, rng):
-                add(sid, position, 1, "practice")
+            for sid, repetition in _numbered(shuffle_no_repeats(chosen, rng)):
+                add(sid, position, repetition, "practice")
         block_tests = [s for s in tests if _matches(s, scope)]
         if between_arrangement:  # one arrangement per condition, rotated over participants
             block_tests = [s for s in block_tests
                            if arrangements(protocol).index(s.arrangement)
                            == (rank + conditions.index(s.condition_id)) % n_arrangements]
         ids = [s.stimulus_id for s in block_tests] * protocol.repetitions
-        seen: Counter = Counter()
-        for sid in shuffle_no_repeats(ids, rng):
-            seen[sid] += 1
-            add(sid, position, seen[sid], "test")
+        for sid, repetition in _numbered(shuffle_no_repeats(ids, rng)):
+            add(sid, position, repetition, "test")
     return trials
+
+
+def _numbered(ids: list[str]) -> list[tuple[str, int]]:
+    """Each id with its repetition number: 1 the first time it appears, 2 the second, …
+
+    >>> _numbered(["a", "b", "a"])
+    [('a', 1), ('b', 1), ('a', 2)]
+    """
+    seen: Counter = Counter()
+    out = []
+    for sid in ids:
+        seen[sid] += 1
+        out.append((sid, seen[sid]))
+    return out
 
 
 def _practice_pick(available: int, wanted: int, rng) -> list[int]:

@@ -155,3 +155,41 @@ def test_shuffle_no_repeats_when_possible_and_reports_impossible():
         assert Counter(order) == counts
         if max(counts.values()) <= (len(items) + 1) // 2:
             assert all(a != b for a, b in zip(order, order[1:]))
+
+
+EXP1_TEXT = open("protocols/exp1_shape_motion.yaml").read()
+
+
+def test_block_orders_balance_over_groups_the_orders_do_not_divide(tmp_path, run_cli):
+    """10 participants in 2 SEX groups of 5: walk-first 3 / jog-first 2 in one group and 2 / 3 in the
+    other (5 / 5 overall, not 6 / 4), and the command says the groups cannot be balanced."""
+    code, stdout, _ = run_cli("design", "protocols/exp1_shape_motion.yaml", "--participants", "10", "--out", tmp_path)
+    assert code == 0
+    trials = pd.read_csv(tmp_path / "trials.csv")
+    first = trials[trials.block == 1].groupby("participant").block_label.first()
+    assert first.value_counts().to_dict() == {"GAIT=walk": 5, "GAIT=jog": 5}
+    sex = trials.groupby("participant").SEX.first()
+    assert sorted(pd.crosstab(sex, first).values.tolist()) == [[2, 3], [3, 2]]
+    note = " ".join(stdout.split())
+    assert "note: blocks.order: 10 participants cannot see the 2 counterbalanced block orders equally often" in note
+    assert "GAIT=walk → GAIT=jog: SEX=F 3, SEX=M 2 (total 5)" in note and "A multiple of 4 participants" in note
+
+
+def test_balanced_block_orders_print_no_note(tmp_path, run_cli):
+    code, stdout, _ = run_cli("design", "protocols/exp1_shape_motion.yaml", "--participants", "8", "--out", tmp_path)
+    assert code == 0 and "note:" not in stdout
+
+
+def test_practice_beyond_the_pool_repeats_numbered_never_back_to_back():
+    """per_block 6 from a pool of 4: two clips come twice, as repetition 1 and 2, never in a row."""
+    from stimuli.protocol import parse_protocol
+
+    design = build_design(parse_protocol(EXP1_TEXT.replace("per_block: 4 ", "per_block: 6 ")), participants=4)
+    blocks = Counter((t.participant, t.block) for t in design.trials if t.kind == "practice")
+    assert set(blocks.values()) == {6}
+    for participant, block in blocks:
+        practice = [t for t in design.trials if (t.participant, t.block, t.kind) == (participant, block, "practice")]
+        ids = [t.stimulus_id for t in practice]
+        assert len(set(ids)) == 4 and all(a != b for a, b in zip(ids, ids[1:]))
+        for sid in set(ids):
+            assert [t.repetition for t in practice if t.stimulus_id == sid] == list(range(1, ids.count(sid) + 1))

@@ -7,7 +7,7 @@ from collections import Counter
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from stimuli.design import arrangements, build_design
+from stimuli.design import arrangements, build_design, williams_orders
 from stimuli.protocol import Protocol
 
 
@@ -24,13 +24,16 @@ def protocols(draw):
     display = {"layout": "treadmill", "body": "A1"}
     alternatives = {}
     response = {"type": "likert", "question": "q?", "labels": ["no", "maybe", "yes"]}
+    measure = "mean_rating"
     if has_alternatives:
         k = draw(st.integers(2, 4))
-        factors.append({"name": "ALT", "role": "alternatives", "levels": [f"a{j}" for j in range(k)]})
+        factors.append({"name": "ALT", "role": "alternatives", "levels": [f"a{j}" for j in range(k)],
+                        "maps_to": "method"})  # a mapping the renderer makes motions for
         display["layout"] = "side_by_side" if k == 2 else "row"
         alternatives = {"arrangements": draw(st.sampled_from(["all", "latin_square", "fixed"])),
                         "counterbalance": draw(st.sampled_from(["within", "between"]))}
         response = {"type": draw(st.sampled_from(["afc", "ranking"])), "question": "which?"}
+        measure = "percent_chosen" if response["type"] == "afc" else "rank_points"
     within_names = [f["name"] for f in factors if f["role"] == "within"]
     block_by = draw(st.lists(st.sampled_from(within_names), unique=True, max_size=2))
     cells = 1
@@ -43,7 +46,7 @@ def protocols(draw):
         "factors": factors, "display": display, "alternatives": alternatives,
         "clip": {"duration_s": 2}, "blocks": {"by": block_by, "order": draw(st.sampled_from(["counterbalanced", "latin_square", "random", "fixed"]))},
         "repetitions": draw(st.integers(1, 3)), "response": response,
-        "analysis": {"dependent_measure": "mean_rating"},
+        "analysis": {"dependent_measure": measure},
     }
     return Protocol.model_validate(data)
 
@@ -77,7 +80,22 @@ def test_trial_lists_satisfy_the_protocol(protocol):
             assert all(stimulus.levels[k] == v for k, v in block.items())
         labels = list(dict.fromkeys(t.block_label for t in trials))
         assert sorted(labels) == sorted(design.blocks)
+    if protocol.blocks.order in ("counterbalanced", "latin_square") and len(design.blocks) > 1:
+        _assert_orders_as_even_as_possible(design, between)
         for label in labels:
             ids = [t.stimulus_id for t in trials if t.block_label == label]
             if max(Counter(ids).values()) <= (len(ids) + 1) // 2:
                 assert all(a != b for a, b in zip(ids, ids[1:]))
+
+
+def _assert_orders_as_even_as_possible(design, between: list[str]) -> None:
+    """Each counterbalanced block order is dealt equally often, give or take one, within every between
+    group and over all participants (the rotation goes on from one group to the next)."""
+    group = {t.participant: tuple(t.groups[n] for n in between) for t in design.trials}
+    orders = {p: tuple(order) for p, order in design.block_orders.items()}
+    n_orders = len(williams_orders(len(design.blocks)))
+    for members in ([p for p in orders if group[p] == g] for g in set(group.values())):
+        counts = Counter(orders[p] for p in members)
+        assert max(counts.values()) - (min(counts.values()) if len(counts) == n_orders else 0) <= 1
+    counts = Counter(orders.values())
+    assert max(counts.values()) - (min(counts.values()) if len(counts) == n_orders else 0) <= 1
