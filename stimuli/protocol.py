@@ -15,7 +15,10 @@ file, the field, the YAML line and what was expected.
 from __future__ import annotations
 
 import json
+import math
 import re
+import types
+import typing
 from pathlib import Path
 from typing import Literal
 
@@ -39,6 +42,11 @@ SOURCE_MOTIONS = ("lean_walk", "modifier", "generator")  # or "bvh:<path>"
 # METHOD levels (NoCOM/COM) name their motions themselves; the setting only documents them (Exp 2).
 METHOD_MOTIONS = ("average", "physics")
 HEX_COLOUR = re.compile(r"^#?[0-9A-Fa-f]{6}$")
+# What an alternatives factor's levels may map to: the renderer makes a motion for each of these
+# (stimuli.render.sources); any other mapping would leave the side-by-side clips without motions.
+ALTERNATIVE_MOTIONS = ("method", "strength", "source")
+# The dependent measures that fit each response type (analysis.io_design checks the same pairs).
+MEASURES_OF_RESPONSE = {"likert": ("mean_rating",), "afc": ("percent_chosen", "votes"), "ranking": ("rank_points",)}
 
 
 class Strict(BaseModel):
@@ -179,14 +187,26 @@ class Camera(Strict):
 
 
 class ClipSettings(Strict):
+    """A clip's length and look. ``cycles`` is the fewest whole gait cycles every declared gait must
+    show (the clip shows as many as fit: see ``stimuli.render.timing``); ``width`` and ``height``
+    are even because H.264 in yuv420p halves them for the colour planes."""
+
     duration_s: float = Field(gt=0, le=120)
-    cycles: int = Field(default=2, ge=1)
+    cycles: int = Field(default=1, ge=1)
     fps: int = Field(default=30, ge=5, le=240)
     width: int = Field(default=1280, ge=64, le=7680)
     height: int = Field(default=720, ge=64, le=4320)
     camera: Camera = Camera()
     background: str = "#ffffff"
     loop: bool = True
+
+    @field_validator("width", "height")
+    @classmethod
+    def _even(cls, value: int) -> int:
+        if value % 2:
+            raise ValueError(f"expected an even number of pixels (H.264 yuv420p cannot encode an odd size), got "
+                             f"{value}; use {value - 1} or {value + 1}")
+        return value
 
     @field_validator("background")
     @classmethod
@@ -355,8 +375,11 @@ def check_consistency(p: Protocol) -> None:
             raise ValueError(f"blocks.by: unknown factor {name!r} (factors: {names})")
         if p.factor(name).role != "within":
             raise ValueError(f"blocks.by: {name} is a {p.factor(name).role} factor; blocks must be within factors")
-    _check_practice(p, names)
+    _check_alternatives_motion(p)
+    _check_measure(p)
+    _check_clip_timing(p)
     _check_screen_mapping(p)
+    _check_practice(p, names)
     between_cells = 1
     for f in p.factors_with_role("between"):
         between_cells *= len(f.levels)
@@ -375,6 +398,73 @@ def _check_practice(p: Protocol, names: list[str]) -> None:
             raise ValueError(f"practice.levels.{name}: {clash} are test levels; practice must use other levels")
     if p.practice.per_block and not p.practice.levels:
         raise ValueError("practice.per_block > 0 needs practice.levels (the practice-only levels to show)")
+    if p.practice.per_block:
+        _check_practice_pool(p)
+
+
+def _check_practice_pool(p: Protocol) -> None:
+    """Each block needs enough distinct practice clips for ``per_block`` trials with no clip twice in
+    a row: one clip cannot be repeated (it would play back to back), none at all means no practice."""
+    from stimuli.design import practice_pool
+
+    wanted, pool = p.practice.per_block, practice_pool(p)
+    shown = ", ".join(f"{name}: {', '.join(levels)}" for name, levels in p.practice.levels.items())
+    if not pool:
+        scope = sorted(set(p.practice.levels) & (set(p.blocks.by) | {f.name for f in p.factors_with_role("between")}))
+        raise ValueError(f"practice.per_block: {wanted} practice trial(s) per block asked for, but no practice clip "
+                         f"belongs to any block: practice.levels gives practice-only levels for {', '.join(scope)}, "
+                         "which define(s) the blocks or the between groups; give practice levels for other factors")
+    if pool == 1 and wanted > 1:
+        raise ValueError(f"practice.per_block: {wanted} practice trials per block asked for, but each block has only "
+                         f"1 distinct practice clip ({shown}), which would play {wanted} times back to back; use "
+                         "per_block: 1 or add practice levels (with 2 or more clips a block may repeat them, never "
+                         "twice in a row)")
+
+
+def _check_alternatives_motion(p: Protocol) -> None:
+    """The levels of an alternatives factor are the motions shown side by side: the renderer makes
+    them only for some mappings, so any other would pass here and fail on every clip."""
+    for index, f in enumerate(p.factors):
+        if f.role == "alternatives" and f.maps_to not in ALTERNATIVE_MOTIONS:
+            hint = f" (to compare {f.maps_to} levels, make {f.name} a within factor)" if f.maps_to != "none" else ""
+            raise ValueError(f"factors.{index}.maps_to: {f.name} is an alternatives factor, whose levels are motions "
+                             f"shown side by side; the renderer makes those for maps_to "
+                             f"{', '.join(ALTERNATIVE_MOTIONS)} only, got {f.maps_to!r}{hint}")
+
+
+def _check_measure(p: Protocol) -> None:
+    """The analysis reads the answers of one response type only (analysis.io_design)."""
+    allowed = MEASURES_OF_RESPONSE[p.response.type]
+    if p.analysis.dependent_measure not in allowed:
+        raise ValueError(f"analysis.dependent_measure: {p.analysis.dependent_measure} does not fit response.type "
+                         f"{p.response.type}; expected {' or '.join(allowed)}")
+
+
+def _check_clip_timing(p: Protocol) -> None:
+    """A looping clip shows whole gait cycles: at least one of every declared gait (shorter clips
+    would play the gait many times too fast), and at least ``clip.cycles``."""
+    if not p.gaits:
+        return  # motions from captures keep their own cadence (stimuli.render.timing)
+    from stimuli.render.timing import TOLERANCE, protocol_fits, seconds_text
+
+    fits = protocol_fits(p)
+    slowest = min(fits, key=lambda fit: fit.cadence_spm)
+    cycle_s = 120.0 / slowest.cadence_spm
+    if slowest.clip_s * (1 + TOLERANCE) < cycle_s:
+        shortest = math.ceil(cycle_s / (1 + TOLERANCE) * p.clip.fps) / p.clip.fps
+        raise ValueError(f"clip.duration_s: {p.clip.duration_s:g} s is shorter than one gait cycle of "
+                         f"{slowest.gait} ({slowest.cadence_spm:g} steps/min: {cycle_s:.2f} s per cycle of two "
+                         f"steps), so the clip would play it at {slowest.effective_cadence_spm:.0f} steps/min; a "
+                         f"looping clip shows at least one whole cycle of every gait: use duration_s >= "
+                         f"{seconds_text(shortest, p.clip.fps)} s (within {TOLERANCE:.0%})")
+    short = [fit for fit in fits if fit.cycles < p.clip.cycles]
+    if short:
+        needed = p.clip.cycles * cycle_s
+        shown = ", ".join(f"{fit.gait} ({fit.cadence_spm:g} steps/min) {fit.cycles}" for fit in short)
+        raise ValueError(f"clip.cycles: every gait must show at least {p.clip.cycles} whole cycles, but the "
+                         f"{p.clip.duration_s:g} s clip shows {shown}; use duration_s >= "
+                         f"{seconds_text(needed, p.clip.fps)} s ({p.clip.cycles} cycles of {slowest.gait}) or "
+                         "lower clip.cycles")
 
 
 def _check_screen_mapping(p: Protocol) -> None:
@@ -505,13 +595,27 @@ def describe_validation_error(exc: ValidationError, source: str, root) -> str:
         line = _line_of(root, loc)
         where = f" (line {line})" if line else ""
         if err["type"] == "extra_forbidden":
-            message = "unknown field (check the spelling; see protocols/*.yaml for the known fields)"
+            known = ", ".join(_known_fields(loc[:-1]))
+            message = f"unknown field (check the spelling; the known fields here: {known})"
         elif err["type"] == "missing":
             message = "required field is missing"
         elif "input" in err and err["type"] not in ("value_error",):
             message += f" (got {err['input']!r})"
         parts.append(f"{field}{where}: {message}")
     return f"{source}: invalid protocol: " + "; ".join(parts)
+
+
+def _known_fields(loc) -> list[str]:
+    """The field names of the protocol model that holds location ``loc`` (e.g. ``["clip"]`` → the
+    clip settings' fields), following lists and mappings of models."""
+    model = Protocol
+    for key in loc:
+        annotation = model.model_fields[str(key)].annotation if str(key) in model.model_fields else model
+        while typing.get_origin(annotation) in (list, dict, typing.Union, types.UnionType):
+            annotation = next(a for a in reversed(typing.get_args(annotation)) if a is not type(None))
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            model = annotation
+    return list(model.model_fields)
 
 
 def _line_of(root, loc) -> int | None:

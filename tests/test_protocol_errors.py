@@ -50,6 +50,35 @@ CASES = {
     "repeated levels": (replace(EXP1, "levels: [F, M]", "levels: [F, F]"), ["factors.0", "levels of SEX repeat"]),
     "abbreviation for an unknown level": (replace(EXP1, "{walk: W, jog: J}", "{walk: W, run: R}"), ["factors.1", "['run']", "not levels of GAIT"]),
     "not a mapping": ("- just\n- a list\n", ["must be a YAML mapping"]),
+    # What the renderer would refuse later must fail here (walkthrough, issue "validate passes things render
+    # then rejects").
+    "alternatives the renderer makes no motion for": (
+        edited(EXP2, lambda d: d["factors"][3].update(maps_to="gait", level_settings={})),
+        ["factors.3.maps_to", "METHOD is an alternatives factor", "method, strength, source only", "'gait'"]),
+    "odd clip width": (replace(EXP1, "width: 1280", "width: 321"), ["clip.width", "line 59", "even", "320 or 322"]),
+    "odd clip height": (replace(EXP1, "height: 720", "height: 181"), ["clip.height", "line 60", "even", "180 or 182"]),
+    "measure that does not fit the response": (
+        replace(EXP1, "dependent_measure: mean_rating", "dependent_measure: percent_chosen"),
+        ["analysis.dependent_measure", "line 88", "percent_chosen does not fit response.type likert", "mean_rating"]),
+    "forced choice analysed as ratings": (
+        replace(EXP2, "dependent_measure: percent_chosen", "dependent_measure: mean_rating"),
+        ["analysis.dependent_measure", "response.type afc", "percent_chosen or votes"]),
+    "clip shorter than one gait cycle": (
+        replace(EXP1, "duration_s: 4 ", "duration_s: 0.1 "),
+        ["clip.duration_s", "line 56", "shorter than one gait cycle of walk (112 steps/min: 1.07 s",
+         "duration_s >= 1.07 s"]),
+    "fewer gait cycles than clip.cycles": (
+        replace(EXP1, "cycles: 2", "cycles: 5"),
+        ["clip.cycles", "line 57", "at least 5 whole cycles", "walk (112 steps/min) 4", "duration_s >= 5.36 s"]),
+    "one practice clip repeated back to back": (
+        replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: [P1], MOTION: [P1]}"),
+        ["practice.per_block", "line 70", "4 practice trials per block", "only 1 distinct practice clip",
+         "BODY: P1, MOTION: P1"]),
+    "practice levels for the block factor": (
+        replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {GAIT: [run]}"),
+        ["practice.per_block", "no practice clip belongs to any block", "GAIT"]),
+    "unknown clip field": (replace(EXP1, "cycles: 2", "cyclez: 2"),
+                           ["clip.cyclez", "line 57", "unknown field", "duration_s, cycles, fps, width, height"]),
 }
 
 

@@ -30,6 +30,7 @@ def register(subparsers) -> None:
 def run_validate(args: argparse.Namespace) -> int:
     from stimuli.design import build_design
     from stimuli.protocol import check_capture_files, load_protocol
+    from stimuli.render.timing import cadence_warnings, fits_summary
 
     protocol = load_protocol(args.protocol)
     check_capture_files(protocol, args.protocol)
@@ -42,7 +43,17 @@ def run_validate(args: argparse.Namespace) -> int:
     print(f"  stimuli: {kinds['test']} test, {kinds['practice']} practice, {kinds['familiarization']} familiarization")
     print(f"  {protocol.participants} participants, {len(design.blocks)} block(s), "
           f"{per_participant} test trials per participant")
+    if protocol.gaits:
+        print(f"  {fits_summary(protocol)}")
+    print_notes(cadence_warnings(protocol), "warning")
+    print_notes(design.notes, "note")
     return 0
+
+
+def print_notes(lines: list[str], kind: str) -> None:
+    """Warnings and notes: things the user should know that do not stop the command."""
+    for line in lines:
+        print(f"{kind}: {line}")
 
 
 def run_design(args: argparse.Namespace) -> int:
@@ -54,6 +65,7 @@ def run_design(args: argparse.Namespace) -> int:
     design = build_design(load_protocol(args.protocol), args.participants, args.seed)
     for path in write_design(design, args.out):
         print(path)
+    print_notes(design.notes, "note")
     return 0
 
 

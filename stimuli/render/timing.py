@@ -1,0 +1,164 @@
+"""How a gait's cadence is fitted to a clip, and what that does to the protocol's cadence and speed.
+
+A looping clip shows a whole number of gait cycles (two steps each): the motion is made with the
+whole number of cycles closest to ``duration_s × cadence_spm / 120`` and ``sources.fit_loop``
+stretches it over the clip's frames. The clip therefore shows ``cycles × 120 / clip seconds``
+steps per minute, and the treadmill belt runs faster or slower by the same ratio. When that
+differs from the protocol's cadence by more than :data:`TOLERANCE`, ``validate`` and ``render``
+say so (:func:`cadence_warnings`), naming clip durations that would keep the cadence.
+
+Only the gaits the protocol declares under ``gaits`` are fitted here: motions read from captures
+(the thesis protocols) keep their own cadence and are retimed to whole loops by ``fit_loop``.
+
+>>> fit = gait_fit("jog", 150, 2.4, duration_s=2, fps=15)
+>>> fit.cycles, round(fit.effective_cadence_spm, 1), round(fit.effective_speed_mps, 2)
+(2, 120.0, 1.92)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+TOLERANCE = 0.02  # a cadence change below 2 % is within a real walker's stride-to-stride variation
+STEPS_PER_CYCLE = 2
+
+
+def whole_cycles(duration_s: float, cadence_spm: float) -> int:
+    """The number of gait cycles a clip shows: ``stimuli.motion.loop.cycles_for_clip``'s rule.
+
+    Restated here (``tests/test_clip_timing.py`` checks the two agree) because importing the motion
+    package loads scipy, which would add a second to every ``validate``.
+
+    >>> whole_cycles(4.0, 112), whole_cycles(4.0, 138)
+    (4, 5)
+    """
+    return max(1, int(round(duration_s * cadence_spm / (60.0 * STEPS_PER_CYCLE))))
+
+
+def clip_seconds(duration_s: float, fps: int) -> float:
+    """The length of a clip as rendered: a whole number of frames (``Look.n_frames``)."""
+    return round(duration_s * fps) / fps
+
+
+@dataclass(frozen=True)
+class GaitFit:
+    """One gait as a clip shows it: the protocol's cadence and speed, and what the clip plays."""
+
+    gait: str
+    cadence_spm: float
+    speed_mps: float
+    clip_s: float
+    cycles: int
+
+    @property
+    def effective_cadence_spm(self) -> float:
+        return self.cycles * 60.0 * STEPS_PER_CYCLE / self.clip_s
+
+    @property
+    def ratio(self) -> float:
+        """Effective / protocol cadence; the belt speed scales by the same ratio."""
+        return self.effective_cadence_spm / self.cadence_spm
+
+    @property
+    def effective_speed_mps(self) -> float:
+        return self.speed_mps * self.ratio
+
+    @property
+    def within_tolerance(self) -> bool:
+        return abs(self.ratio - 1.0) <= TOLERANCE
+
+
+def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float, fps: int) -> GaitFit:
+    """How a clip of ``duration_s`` at ``fps`` shows a gait of the given cadence and speed."""
+    return GaitFit(gait, float(cadence_spm), float(speed_mps), clip_seconds(duration_s, fps),
+                   whole_cycles(duration_s, cadence_spm))
+
+
+def protocol_fits(protocol, fps: int | None = None) -> list[GaitFit]:
+    """The fit of every gait the protocol declares, at the protocol's clip duration (and frame rate,
+    unless ``fps`` overrides it as ``render --fps``/``--quick`` do)."""
+    clip = protocol.clip
+    return [gait_fit(name, spec.cadence_spm, spec.speed_mps, clip.duration_s, fps or clip.fps)
+            for name, spec in protocol.gaits.items()]
+
+
+def keeping_durations(cadences: list[float], duration_s: float, fps: int) -> tuple[float | None, float | None]:
+    """The clip durations nearest to ``duration_s`` (one shorter or equal, one longer) at which every
+    cadence is shown within :data:`TOLERANCE`; None where there is none up to 120 s (the longest clip).
+
+    Candidates are the whole-cycle durations of each gait, rounded to whole frames.
+
+    >>> keeping_durations([150], 2.0, 15)
+    (1.6, 2.4)
+    """
+    candidates = set()
+    for cadence in cadences:
+        cycle_s = 60.0 * STEPS_PER_CYCLE / cadence
+        for k in range(1, int(120.0 / cycle_s) + 1):
+            d = clip_seconds(k * cycle_s, fps)
+            if d > 0 and all(gait_fit("", c, 1.0, d, fps).within_tolerance for c in cadences):
+                candidates.add(round(d, 6))
+    shorter = max((d for d in candidates if d <= duration_s), default=None)
+    longer = min((d for d in candidates if d > duration_s), default=None)
+    return shorter, longer
+
+
+def seconds_text(seconds: float, fps: int) -> str:
+    """A duration with the fewest decimals (2 to 4) that still gives the same whole number of frames.
+
+    >>> seconds_text(17 / 15, 15), seconds_text(2.4, 15)
+    ('1.13', '2.4')
+    """
+    frames = round(seconds * fps)
+    for decimals in (2, 3, 4):
+        text = f"{seconds:.{decimals}f}".rstrip("0").rstrip(".")
+        if round(float(text) * fps) == frames:
+            return text
+    return f"{seconds:g}"
+
+
+def _seconds(values, fps: int) -> str:
+    return " or ".join(f"{seconds_text(v, fps)} s" for v in values if v is not None)
+
+
+def cadence_warnings(protocol, fps: int | None = None) -> list[str]:
+    """One warning per declared gait whose clip cadence is off by more than :data:`TOLERANCE`, plus,
+    with several gaits, the nearest durations that keep all of them."""
+    fits = protocol_fits(protocol, fps)
+    rate = fps or protocol.clip.fps
+    duration = protocol.clip.duration_s
+    warnings = []
+    for fit in fits:
+        if fit.within_tolerance:
+            continue
+        keep = _seconds(keeping_durations([fit.cadence_spm], duration, rate), rate)
+        warnings.append(
+            f"gaits.{fit.gait}: {fit.cadence_spm:g} steps/min does not fill the {fit.clip_s:g} s clip with whole "
+            f"gait cycles, so the clip shows {fit.cycles} cycle(s) at {fit.effective_cadence_spm:.1f} steps/min "
+            f"({(fit.ratio - 1) * 100:+.1f} %) and the belt runs at about {fit.effective_speed_mps:.2f} m/s instead of "
+            f"{fit.speed_mps:g}" + (f"; clip.duration_s {keep} keeps {fit.cadence_spm:g} steps/min "
+                                    f"(within {TOLERANCE:.0%})" if keep else ""))
+    if warnings and len(fits) > 1:
+        both = _seconds(keeping_durations([f.cadence_spm for f in fits], duration, rate), rate)
+        warnings.append(f"clip.duration_s: {both} keeps every gait within {TOLERANCE:.0%}" if both else
+                        f"clip.duration_s: no clip up to 120 s keeps every gait within {TOLERANCE:.0%}")
+    return warnings
+
+
+def fits_summary(protocol) -> str:
+    """One line for ``validate``: the cycles and cadence each declared gait is shown with."""
+    parts = [f"{f.gait} {f.cycles} cycle(s) at {f.effective_cadence_spm:.1f} steps/min "
+             f"(protocol {f.cadence_spm:g})" for f in protocol_fits(protocol)]
+    return f"clip {protocol.clip.duration_s:g} s: " + ", ".join(parts)
+
+
+def clip_cadence(protocol, stimulus, duration_s: float, fps: int) -> str:
+    """The manifest's ``cadence_spm``: the steps per minute a clip shows, for clips whose gait the
+    protocol declares ('' for motions read from captures, which keep their own cadence)."""
+    from stimuli.render.sources import gait_of
+
+    spec = protocol.gaits.get(gait_of(protocol, stimulus))
+    if spec is None:
+        return ""
+    fit = gait_fit("", spec.cadence_spm, spec.speed_mps, duration_s, fps)
+    return f"{fit.effective_cadence_spm:.2f}"
