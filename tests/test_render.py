@@ -214,5 +214,8 @@ def test_inputs_hash_follows_look_stimulus_and_motion_files(tmp_path, protocol_p
     assert base == inputs_hash(protocol, first, look, [motion])
     assert base != inputs_hash(protocol, second, look, [motion])
     assert base != inputs_hash(protocol, first, look_for(protocol, first, resolution="640x360"), [motion])
+    # A stepping-pose clip is not the real one; protocol renders keep the hashes they had.
+    assert base == inputs_hash(protocol, first, look, [motion], poses="protocol")
+    assert base != inputs_hash(protocol, first, look, [motion], poses="procedural")
     motion.write_bytes(b"two")
     assert base != inputs_hash(protocol, first, look, [motion])

@@ -1,4 +1,4 @@
-"""The render pipeline on the bundled protocols (shortened to 1 s clips, 160×90 … 320×180):
+"""The render pipeline on the bundled protocols (shortened to 1.1 s clips, 160×90 … 320×180):
 manifest columns and hashes, resuming, side-by-side placement, errors, the CLI."""
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ import subprocess
 import sys
 import time
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import yaml
@@ -19,11 +21,12 @@ DESIGN_COLUMNS = ["stimulus_id", "file", "sha256", "width", "height", "fps", "n_
 
 @pytest.fixture
 def short_protocol(tmp_path, protocol_path):
-    """A bundled protocol with 1-second clips (same design), written to tmp_path."""
+    """A bundled protocol with short clips (same design), written to tmp_path: 1.1 s holds one whole
+    walk cycle at 112 steps/min (1.07 s), the shortest clip validation accepts (with ``cycles: 1``)."""
 
-    def make(name, duration=1.0):
+    def make(name, duration=1.1):
         data = yaml.safe_load(protocol_path(name).read_text())
-        data["clip"]["duration_s"] = duration
+        data["clip"].update(duration_s=duration, cycles=1)
         path = tmp_path / f"{name}.yaml"
         path.write_text(yaml.safe_dump(data))
         return path
@@ -56,8 +59,10 @@ def test_manifest_has_design_columns_and_verifiable_hashes(short_protocol, tmp_p
     assert header[9:13] == ["SEX", "GAIT", "BODY", "MOTION"] and "practice" in header
     for row in rows:
         frames, meta = read_video(out / row["file"])
-        assert frames.shape == (10, 90, 160, 3) and int(row["n_frames"]) == 10 and meta["fps"] == 10
+        assert frames.shape == (11, 90, 160, 3) and int(row["n_frames"]) == 11 and meta["fps"] == 10
         assert (out / row["poster"]).exists()
+        assert row["cadence_spm"] == ""  # procedural stepping poses do not follow the gait's cadence
+    assert header[-1] == "cadence_spm"  # added after the columns older manifests have
     assert verify_manifest(out) == []
     assert run_cli("render", "--out", out, "--verify")[0] == 0
     assert (out / "contact_sheet.png").exists()
@@ -103,11 +108,50 @@ def test_side_by_side_left_and_right_match_the_manifest(short_protocol, tmp_path
 
 def test_missing_motion_sources_are_named_not_faked(short_protocol, tmp_path, run_cli):
     code, out, err = run_cli("render", short_protocol("exp2_com_vs_average"), "--out", tmp_path / "x",
-                             "--limit", "1", "--resolution", "160x90", "--no-progress")
+                             "--limit", "3", "--resolution", "160x90", "--no-progress")
     assert code == 2
-    assert "could not be rendered" in err and "physics protocol" in err
+    message = " ".join(err.split())
+    assert "3 stimulus clip(s) could not be rendered, for 1 reason(s)" in message and "physics protocol" in message
+    assert message.count("--motions DIR") == 1  # NoCOM-left and COM-left clips share one reason
     assert not list((tmp_path / "x").glob("clips/*.mp4"))
 
+
+def test_failures_are_grouped_by_reason_each_reason_once():
+    """Twelve clips failing for two reasons (their messages name each clip): each reason once, with its
+    count and a few of its clips, nothing left out."""
+    from types import SimpleNamespace
+
+    from stimuli.render.pipeline import RenderReport, _failure_message
+
+    ids = [f"{view}-{body}-{pair}" for view in "ab" for body in ("Thin", "Mid", "Heavy") for pair in ("walk_jog", "jog_walk")]
+    failed = {sid: f"afc: stimulus {sid} needs a motion; the renderer maps only method, strength and source levels"
+              for sid in ids[:8]}
+    failed |= {sid: f"afc: body of {sid} does not fit" for sid in ids[8:]}
+    message = _failure_message(SimpleNamespace(name="afc"), RenderReport(Path("out"), failed=failed))
+    assert "12 stimulus clip(s) could not be rendered, for 2 reason(s)" in message
+    assert message.count("the renderer maps only") == 1 and message.count("does not fit") == 1
+    assert "8 clip(s) (a-Thin-walk_jog, a-Thin-jog_walk, a-Mid-walk_jog, … 5 more): stimulus <clip> needs" in message
+    assert "4 clip(s) (b-Mid-walk_jog, b-Mid-jog_walk, b-Heavy-walk_jog, … 1 more): body of <clip>" in message
+
+
+def test_many_reasons_are_counted_not_dropped():
+    from types import SimpleNamespace
+
+    from stimuli.render.pipeline import MAX_REASONS, RenderReport, _failure_message
+
+    failed = {f"s{i}": f"capture {i}.bvh not found" for i in range(MAX_REASONS + 3)}
+    message = _failure_message(SimpleNamespace(name="p"), RenderReport(Path("out"), failed=failed))
+    assert message.count("1 clip(s) (") == MAX_REASONS and "3 other reason(s) for 3 clip(s)" in message
+
+
+def test_render_warns_when_the_clip_changes_a_gaits_cadence(short_protocol, tmp_path, run_cli):
+    """A 2 s clip plays a 150 steps/min jog as 2 cycles at 120 steps/min: said before rendering."""
+    path = short_protocol("exp1_shape_motion", duration=2.0)
+    code, stdout, _ = run_cli("render", path, "--out", tmp_path / "r", "--limit", "1", "--resolution", "160x90",
+                              "--fps", "10", "--poses", "procedural", "--no-progress", "--no-survey")
+    assert code == 0
+    assert "warning: gaits.jog: 138 steps/min does not fill the 2 s clip" in stdout
+    assert "2 cycle(s) at 120.0 steps/min (-13.0 %)" in stdout
 
 def test_render_without_a_protocol_is_a_user_error(tmp_path, run_cli):
     code, _, err = run_cli("render", "--out", tmp_path)
@@ -165,6 +209,8 @@ def test_exp1_end_to_end_with_real_motions(short_protocol, tmp_path):
     report = _render(short_protocol("exp1_shape_motion"), out, only="M-jog-Hi2-Lo1", source="protocol",
                      resolution="320x180", fps=15)
     assert report.rendered == ["M-jog-Hi2-Lo1"]
+    # 138 steps/min in 16 frames at 15 fps (1.07 s): one whole cycle, played at 112.5 steps/min
+    assert _manifest(out)[0]["cadence_spm"] == "112.50"
     frames, _ = read_video(out / _manifest(out)[0]["file"])
     body = (np.abs(frames.astype(int) - 158).max(axis=-1) < 40).sum(axis=(1, 2))
     assert body.min() > 500 and np.abs(np.diff(frames.astype(int), axis=0)).mean() > 0.1

@@ -7,7 +7,7 @@ import yaml
 
 def short(tmp_path, protocol_path, name):
     data = yaml.safe_load(protocol_path(name).read_text())
-    data["clip"]["duration_s"] = 1.0
+    data["clip"].update(duration_s=1.1, cycles=1)  # one whole walk cycle at 112 steps/min: the shortest valid clip
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

@@ -68,7 +68,7 @@ def run_render(args: argparse.Namespace) -> int:
     _check_render_options(args)
     report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps, limit=args.limit,
                              only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
-                             source=args.poses, motions_dir=args.motions)
+                             source=args.poses, motions_dir=args.motions, warn=lambda line: print(f"warning: {line}"))
     print(report.summary())
     if not args.no_survey:
         for line in survey_for_render_folder(args.protocol, args.out, report, args.video_base_url):

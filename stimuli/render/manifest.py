@@ -2,7 +2,9 @@
 
 Columns: ``stimulus_id, file, sha256, width, height, fps, n_frames, duration_s, layout,
 <factor columns>, left, right`` (two alternatives) or ``positions`` (k > 2), ``practice``, then
-``kind, poster, inputs_hash``. ``file`` and ``poster`` are relative to the manifest's folder.
+``kind, poster, inputs_hash, cadence_spm``. ``file`` and ``poster`` are relative to the manifest's
+folder; ``cadence_spm`` is the steps per minute the clip shows (``stimuli.render.timing``), empty
+for motions read from captures, procedural poses and rows written before the column existed.
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ from stimuli.fileio import atomic_write_text, csv_text
 MANIFEST = "manifest.csv"
 
 
-def manifest_row(protocol, stimulus, look, info, out_dir: Path, poster: Path, digest: str) -> dict[str, object]:
-    """The manifest row of one finished clip."""
+def manifest_row(protocol, stimulus, look, info, out_dir: Path, poster: Path, digest: str,
+                 poses: str = "protocol") -> dict[str, object]:
+    """The manifest row of one finished clip (``poses``: the render's pose source)."""
+    from stimuli.render.timing import clip_cadence
     row: dict[str, object] = {
         "stimulus_id": stimulus.stimulus_id, "file": info.path.relative_to(out_dir).as_posix(),
         "sha256": info.sha256, "width": look.width, "height": look.height, "fps": look.fps,
@@ -32,7 +36,15 @@ def manifest_row(protocol, stimulus, look, info, out_dir: Path, poster: Path, di
         row["positions"] = "|".join(stimulus.arrangement)
     row |= {"practice": int(stimulus.practice), "kind": stimulus.kind,
             "poster": poster.relative_to(out_dir).as_posix(), "inputs_hash": digest}
+    # A procedural stepping pose does not follow the gait's cadence.
+    row["cadence_spm"] = clip_cadence(protocol, stimulus, look.duration_s, look.fps) if poses == "protocol" else ""
     return row
+
+
+def with_all_columns(row: dict[str, str]) -> dict[str, str]:
+    """A row kept from an earlier manifest, with the columns added since (empty), so that every row of
+    the rewritten manifest has the same columns."""
+    return row if "cadence_spm" in row else row | {"cadence_spm": ""}
 
 
 def read_manifest(out_dir: str | Path) -> dict[str, dict[str, str]]:

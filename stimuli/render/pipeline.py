@@ -18,7 +18,7 @@ from pathlib import Path
 
 from stimuli.errors import StimuliError
 from stimuli.render.clip import Look
-from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, write_manifest
+from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, with_all_columns, write_manifest
 from stimuli.render.settings import inputs_hash, look_for
 from stimuli.render.video import check_interrupted, install_interrupt_handler
 
@@ -42,6 +42,7 @@ class RenderReport:
     skipped: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
     contact_sheet: Path | None = None
+    warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
         return (f"{len(self.rendered)} rendered, {len(self.skipped)} unchanged, {len(self.failed)} not renderable"
@@ -62,13 +63,14 @@ def select(stimuli: list, only: str | list[str] | None, limit: int | None) -> li
     return stimuli
 
 
-def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=False, motions_dir=None) -> list[Job]:
+def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=False, motions_dir=None,
+         source: str = "protocol") -> list[Job]:
     from stimuli.render.sources import motion_files
 
     jobs = []
     for s in stimuli:
         look = look_for(protocol, s, resolution, fps, quick)
-        digest = inputs_hash(protocol, s, look, motion_files(protocol, s, motions_dir))
+        digest = inputs_hash(protocol, s, look, motion_files(protocol, s, motions_dir), poses=source)
         jobs.append(Job(s, look, digest, out_dir / "clips" / f"{s.stimulus_id}.mp4",
                         out_dir / "posters" / f"{s.stimulus_id}.png"))
     return jobs
@@ -98,7 +100,7 @@ def render_job(protocol, job: Job, source: str = "protocol", motions_dir=None) -
     look = job.look
     info = write_video(render_frames(look, figures), job.clip, look.fps, look.width, look.height, look.n_frames,
                        poster=job.poster)
-    return manifest_row(protocol, job.stimulus, look, info, job.clip.parents[1], job.poster, job.digest)
+    return manifest_row(protocol, job.stimulus, look, info, job.clip.parents[1], job.poster, job.digest, source)
 
 
 def _worker_job(args):
@@ -111,15 +113,18 @@ def _worker_job(args):
 
 def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=None, only=None, workers=None,
                     quick: bool = False, progress: bool = True, source: str = "protocol", strict: bool = True,
-                    sheet: bool = True, motions_dir=None) -> RenderReport:
+                    sheet: bool = True, motions_dir=None, warn=None) -> RenderReport:
     """Render every test, practice and familiarization stimulus of a protocol's design.
 
     ``strict``: raise StimuliError after rendering what can be rendered when some stimuli could
     not be (their motion source is missing); otherwise only report them in the result.
     ``motions_dir``: the folder of ``shapemotion physics protocol`` (Exp 2's NoCOM/COM motions).
+    ``warn``: called with each warning (a gait whose cadence the clip changes) before rendering;
+    the warnings are also kept in ``report.warnings``.
     """
     from stimuli.design import build_design
     from stimuli.protocol import load_protocol
+    from stimuli.render.timing import cadence_warnings
 
     if source not in SOURCES:
         raise StimuliError(f"--poses: expected one of {', '.join(SOURCES)}, got {source!r}")
@@ -127,10 +132,13 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     out_dir = Path(out_dir)
     design = build_design(protocol)
     order = [s.stimulus_id for s in design.stimuli]
-    jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick, motions_dir)
+    jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick, motions_dir, source)
     previous = read_manifest(out_dir)
-    report = RenderReport(out_dir)
-    rows = {sid: row for sid, row in previous.items() if sid in order and (out_dir / row["file"]).exists()}
+    report = RenderReport(out_dir, warnings=cadence_warnings(protocol, jobs[0].look.fps if jobs else None))
+    for line in report.warnings if warn else ():
+        warn(line)
+    rows = {sid: with_all_columns(row) for sid, row in previous.items()
+            if sid in order and (out_dir / row["file"]).exists()}
     todo = []
     for job in jobs:
         if is_current(job, previous.get(job.stimulus.stimulus_id)):
@@ -237,11 +245,35 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
         bar.close()
 
 
+MAX_REASONS, MAX_EXAMPLES = 8, 3  # enough to act on; the rest is counted, never dropped silently
+
+
+def failure_groups(protocol_name: str, failed: dict[str, str]) -> dict[str, list[str]]:
+    """Failed clips grouped by reason, largest group first. A reason is the message without the
+    protocol's name in front and with the clip's own id replaced by ``<clip>``, so that one cause
+    shared by many clips is one group.
+
+    >>> failure_groups("p", {"a-1": "p: a-1 has no motion", "b-2": "p: b-2 has no motion", "c": "x missing"})
+    {'<clip> has no motion': ['a-1', 'b-2'], 'x missing': ['c']}
+    """
+    groups: dict[str, list[str]] = {}
+    for sid, message in failed.items():
+        reason = message.removeprefix(f"{protocol_name}: ").replace(sid, "<clip>")
+        groups.setdefault(reason, []).append(sid)
+    return dict(sorted(groups.items(), key=lambda item: -len(item[1])))
+
+
 def _failure_message(protocol, report: RenderReport) -> str:
-    reasons: dict[str, list[str]] = {}
-    for sid, message in report.failed.items():
-        key = message.split(": ", 1)[-1]
-        reasons.setdefault(key, []).append(sid)
-    parts = [f"{len(ids)} clip(s) (e.g. {ids[0]}): {why}" for why, ids in reasons.items()]
-    return (f"{protocol.name}: {len(report.failed)} stimulus clip(s) could not be rendered; "
-            f"{len(report.rendered)} rendered, {len(report.skipped)} unchanged. " + " | ".join(parts[:4]))
+    """One paragraph: how many clips failed, then each reason once with its count and a few ids."""
+    groups = list(failure_groups(protocol.name, report.failed).items())
+    parts = []
+    for reason, ids in groups[:MAX_REASONS]:
+        more = f", … {len(ids) - MAX_EXAMPLES} more" if len(ids) > MAX_EXAMPLES else ""
+        parts.append(f"{len(ids)} clip(s) ({', '.join(ids[:MAX_EXAMPLES])}{more}): {reason}")
+    rest = groups[MAX_REASONS:]
+    if rest:
+        parts.append(f"{len(rest)} other reason(s) for {sum(len(ids) for _, ids in rest)} clip(s), e.g. "
+                     f"{rest[0][1][0]}: {rest[0][0]}")
+    return (f"{protocol.name}: {len(report.failed)} stimulus clip(s) could not be rendered, for "
+            f"{len(groups)} reason(s); {len(report.rendered)} rendered, {len(report.skipped)} unchanged. "
+            + " | ".join(parts))

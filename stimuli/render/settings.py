@@ -87,9 +87,10 @@ def files_digest(paths) -> str:
     return digest.hexdigest()
 
 
-def inputs_hash(protocol, stimulus, look: Look, motion_files=()) -> str:
+def inputs_hash(protocol, stimulus, look: Look, motion_files=(), poses: str = "protocol") -> str:
     """SHA-256 over everything a clip depends on: the stimulus, its actors, gaits, look, versions,
-    the upstream code (:func:`upstream_digest`) and any motion files it reads."""
+    the upstream code (:func:`upstream_digest`), any motion files it reads and the pose source (only
+    when it is not the protocol's, so that the hashes of protocol renders stay as they were)."""
     actor_ids = {stimulus.body_actor, stimulus.motion_actor, protocol.display.body} - {"", None}
     payload = {
         "render_version": RENDER_VERSION,
@@ -103,4 +104,6 @@ def inputs_hash(protocol, stimulus, look: Look, motion_files=()) -> str:
         "upstream": upstream_digest(),
         "motion_files": files_digest(motion_files),
     }
+    if poses != "protocol":  # a stepping-pose clip must not pass for the real one on the next render
+        payload["poses"] = poses
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()

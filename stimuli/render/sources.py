@@ -101,6 +101,8 @@ def _labels(protocol, n: int) -> list[str]:
 
 
 def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: str, motions_dir=None) -> Figure:
+    """One of the figures shown side by side; ``kind`` is one of ``protocol.ALTERNATIVE_MOTIONS``
+    (validation refuses any other mapping of an alternatives factor)."""
     body = body_of(protocol, stimulus.body_actor)
     gait = gait_of(protocol, stimulus)
     if kind == "method":
@@ -109,13 +111,10 @@ def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: 
         from stimuli.render.thesis_sources import strength_motion
 
         rot, root, speed = strength_motion(protocol, stimulus, level, body, look)
-    elif kind == "source":  # thesis validation: the walk the SOURCE level's settings name
+    else:  # "source", thesis validation: the walk the SOURCE level's settings name
         from stimuli.render.thesis_sources import source_motion
 
         rot, root, speed = source_motion(protocol, stimulus, level, body, look)
-    else:
-        raise MissingSource(f"{protocol.name}: stimulus {stimulus.stimulus_id} needs a motion for {kind} = "
-                            f"{level!r}; the renderer maps only method, strength and source levels to motions")
     return Figure(body, rot, root, speed, label)
 
 
@@ -193,7 +192,8 @@ def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, 
 
     sex = body.sex
     if motions_dir is None:
-        raise MissingSource(f"METHOD = {method} needs the NoCOM/COM motions of the physics step: run "
+        # One message for every level: each clip fails on the same missing folder.
+        raise MissingSource("the NoCOM/COM motions (maps_to: method) come from the physics step: run "
                             f"'shapemotion physics protocol {protocol.name}.yaml --out DIR' and render with "
                             "--motions DIR")
     name = _method_file(protocol, method, stimulus, gait, sex)
