@@ -450,6 +450,12 @@ def _check_clip_timing(p: Protocol) -> None:
     fits = protocol_fits(p)
     slowest = min(fits, key=lambda fit: fit.cadence_spm)
     cycle_s = 120.0 / slowest.cadence_spm
+    if not p.clip.loop:   # the exact cadence, cut at the end: only the cycles shown can fall short
+        if slowest.shown_cycles * (1 + TOLERANCE) < p.clip.cycles:
+            raise ValueError(f"clip.cycles: the {p.clip.duration_s:g} s clip shows {slowest.shown_cycles:.2f} cycles of "
+                             f"{slowest.gait} ({slowest.cadence_spm:g} steps/min), fewer than {p.clip.cycles}; use "
+                             f"duration_s >= {seconds_text(p.clip.cycles * cycle_s, p.clip.fps)} s or lower clip.cycles")
+        return
     if slowest.clip_s * (1 + TOLERANCE) < cycle_s:
         shortest = math.ceil(cycle_s / (1 + TOLERANCE) * p.clip.fps) / p.clip.fps
         raise ValueError(f"clip.duration_s: {p.clip.duration_s:g} s is shorter than one gait cycle of "

@@ -57,7 +57,7 @@ def test_validate_warns_per_gait_whose_cadence_the_clip_changes(tmp_path, protoc
     code, stdout, _ = run_cli("validate", pilot(tmp_path, protocol_path))
     assert code == 0
     out = " ".join(stdout.split())
-    assert "clip 2 s: walk 2 cycle(s) at 120.0 steps/min (protocol 108), jog 2 cycle(s) at 120.0" in out
+    assert "clip 2 s (looped): walk 2 cycle(s) at 120.0 steps/min (protocol 108), jog 2 cycle(s) at 120.0" in out
     assert ("warning: gaits.jog: 150 steps/min does not fill the 2 s clip with whole gait cycles, so the clip shows "
             "2 cycle(s) at 120.0 steps/min (-20.0 %) and the belt runs at about 1.92 m/s instead of 2.4; "
             "clip.duration_s 1.6 s or 2.4 s keeps 150 steps/min") in out
@@ -68,3 +68,22 @@ def test_validate_warns_per_gait_whose_cadence_the_clip_changes(tmp_path, protoc
 def test_no_warning_when_the_clip_keeps_the_cadence(tmp_path, protocol_path, run_cli):
     code, stdout, _ = run_cli("validate", pilot(tmp_path, protocol_path, duration_s=5.53))
     assert code == 0 and "warning:" not in stdout
+
+
+def test_a_clip_that_does_not_loop_keeps_the_cadence(tmp_path, protocol_path, run_cli):
+    """clip.loop: false used to change nothing; the clip now plays the protocol's cadence and belt speed,
+    cut at its end."""
+    from stimuli.motion.style import actor_gait
+    from stimuli.protocol import Actor
+    from stimuli.render.sources import fit_loop
+
+    code, stdout, _ = run_cli("validate", pilot(tmp_path, protocol_path, loop=False, cycles=1))
+    out = " ".join(stdout.split())
+    assert code == 0 and "warning:" not in out
+    assert "clip 2 s (not looped: the exact cadence, cut at the clip's end): walk 1.80 cycle(s) at 108.0" in out
+    actor = Actor(id="F_Avg", label="Avg", sex="F", height_m=1.65, bmi=23.4)
+    motion = actor_gait(actor, "jog", 150, 2.4, 77, 15.0, whole_cycles(2.0, 150))
+    rot, _, scale = fit_loop(motion.rotations, motion.root_translation, motion.fps, 30, 15, loop=False)
+    assert scale == 1.0 and len(rot) == 30 and motion.metadata["cadence_spm"] == pytest.approx(150, rel=0.01)
+    code, _, err = run_cli("validate", pilot(tmp_path, protocol_path, loop=False, cycles=3))
+    assert code == 2 and "shows 1.80 cycles of walk (108 steps/min), fewer than 3" in " ".join(err.split())

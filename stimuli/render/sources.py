@@ -27,11 +27,13 @@ class MissingSource(StimuliError):
     """A stimulus needs a motion source that shapemotion does not provide (yet)."""
 
 
-def fit_loop(rotations: np.ndarray, root: np.ndarray, fps: float, n_frames: int, clip_fps: float):
+def fit_loop(rotations: np.ndarray, root: np.ndarray, fps: float, n_frames: int, clip_fps: float,
+             loop: bool = True):
     """Resample a looping pose sequence to ``n_frames`` at ``clip_fps`` holding whole loops.
 
     Returns (rotations (N, J, 4), root (N, 3), time_scale) where time_scale > 1 means the motion
-    plays faster than recorded (multiply its speed by it).
+    plays faster than recorded (multiply its speed by it). With ``loop`` False the motion plays at
+    its own pace (time_scale 1) and the clip ends wherever its last frame falls (``clip.loop: false``).
 
     >>> import numpy as np
     >>> rot = np.tile([1.0, 0, 0, 0], (30, 2, 1)); root = np.zeros((30, 3)); root[:, 1] = np.arange(30)
@@ -44,7 +46,7 @@ def fit_loop(rotations: np.ndarray, root: np.ndarray, fps: float, n_frames: int,
     loop_s = len(rotations) / fps
     clip_s = n_frames / clip_fps
     loops = max(1, int(round(clip_s / loop_s)))
-    scale = loops * loop_s / clip_s
+    scale = loops * loop_s / clip_s if loop else 1.0
     src = (np.arange(n_frames) / clip_fps * scale * fps) % len(rotations)
     i0 = np.floor(src).astype(int) % len(rotations)
     i1 = (i0 + 1) % len(rotations)
@@ -134,7 +136,8 @@ def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
     motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
                         float(look.fps), cycles)
     on_body = on_rig(motion, body)
-    rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps)
+    rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps,
+                                 look.loop)
     speed = float(on_body.metadata.get("belt_speed_mps", spec.speed_mps)) * scale
     return rot, root, speed
 
@@ -202,7 +205,8 @@ def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, 
         raise MissingSource(f"--motions {motions_dir}: {name} not found (METHOD = {method}, body "
                             f"{stimulus.body_actor}, {gait}); run 'shapemotion physics protocol' into that folder")
     on_body = on_rig(Motion.load(path), body)
-    rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps)
+    rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps,
+                                 look.loop)
     spec = protocol.gaits.get(gait)
     speed = float(on_body.metadata.get("belt_speed_mps", spec.speed_mps if spec else 0.0)) * scale
     return rot, root, speed

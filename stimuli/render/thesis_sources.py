@@ -34,7 +34,7 @@ _ON_BODY: dict = {}  # (body id, body targets, file) -> the walk on that body, p
 
 def _fitted(motion, look: Look, fallback_speed: float):
     """(rotations, root, belt speed) of a looping motion resampled to the clip's frames."""
-    rot, root, scale = fit_loop(motion.rotations, motion.root_translation, motion.fps, look.n_frames, look.fps)
+    rot, root, scale = fit_loop(motion.rotations, motion.root_translation, motion.fps, look.n_frames, look.fps, look.loop)
     return rot, root, float(motion.metadata.get("belt_speed_mps", fallback_speed)) * scale
 
 

@@ -5,7 +5,8 @@ whole number of cycles closest to ``duration_s × cadence_spm / 120`` and ``sour
 stretches it over the clip's frames. The clip therefore shows ``cycles × 120 / clip seconds``
 steps per minute, and the treadmill belt runs faster or slower by the same ratio. When that
 differs from the protocol's cadence by more than :data:`TOLERANCE`, ``validate`` and ``render``
-say so (:func:`cadence_warnings`), naming clip durations that would keep the cadence.
+say so (:func:`cadence_warnings`), naming clip durations that would keep the cadence. A clip with
+``clip.loop: false`` keeps the protocol's cadence and speed and ends mid-cycle (a replay restarts it).
 
 Only the gaits the protocol declares under ``gaits`` are fitted here: motions read from captures
 (the thesis protocols) keep their own cadence and are retimed to whole loops by ``fit_loop``.
@@ -49,10 +50,17 @@ class GaitFit:
     speed_mps: float
     clip_s: float
     cycles: int
+    loop: bool = True
 
     @property
     def effective_cadence_spm(self) -> float:
-        return self.cycles * 60.0 * STEPS_PER_CYCLE / self.clip_s
+        """Steps per minute the clip shows: whole cycles over the clip, or (not looped) the protocol's."""
+        return self.cycles * 60.0 * STEPS_PER_CYCLE / self.clip_s if self.loop else self.cadence_spm
+
+    @property
+    def shown_cycles(self) -> float:
+        """Gait cycles the clip shows (a whole number when it loops)."""
+        return self.clip_s * self.effective_cadence_spm / (60.0 * STEPS_PER_CYCLE)
 
     @property
     def ratio(self) -> float:
@@ -68,17 +76,19 @@ class GaitFit:
         return abs(self.ratio - 1.0) <= TOLERANCE
 
 
-def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float, fps: int) -> GaitFit:
-    """How a clip of ``duration_s`` at ``fps`` shows a gait of the given cadence and speed."""
+def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float, fps: int,
+             loop: bool = True) -> GaitFit:
+    """How a clip of ``duration_s`` at ``fps`` shows a gait of the given cadence and speed (``loop``:
+    the protocol's ``clip.loop``; a clip that does not loop keeps the cadence and is cut at its end)."""
     return GaitFit(gait, float(cadence_spm), float(speed_mps), clip_seconds(duration_s, fps),
-                   whole_cycles(duration_s, cadence_spm))
+                   whole_cycles(duration_s, cadence_spm), bool(loop))
 
 
 def protocol_fits(protocol, fps: int | None = None) -> list[GaitFit]:
     """The fit of every gait the protocol declares, at the protocol's clip duration (and frame rate,
     unless ``fps`` overrides it as ``render --fps``/``--quick`` do)."""
     clip = protocol.clip
-    return [gait_fit(name, spec.cadence_spm, spec.speed_mps, clip.duration_s, fps or clip.fps)
+    return [gait_fit(name, spec.cadence_spm, spec.speed_mps, clip.duration_s, fps or clip.fps, clip.loop)
             for name, spec in protocol.gaits.items()]
 
 
@@ -147,9 +157,10 @@ def cadence_warnings(protocol, fps: int | None = None) -> list[str]:
 
 def fits_summary(protocol) -> str:
     """One line for ``validate``: the cycles and cadence each declared gait is shown with."""
-    parts = [f"{f.gait} {f.cycles} cycle(s) at {f.effective_cadence_spm:.1f} steps/min "
+    parts = [f"{f.gait} {f.shown_cycles:.{0 if f.loop else 2}f} cycle(s) at {f.effective_cadence_spm:.1f} steps/min "
              f"(protocol {f.cadence_spm:g})" for f in protocol_fits(protocol)]
-    return f"clip {protocol.clip.duration_s:g} s: " + ", ".join(parts)
+    looping = "looped" if protocol.clip.loop else "not looped: the exact cadence, cut at the clip's end"
+    return f"clip {protocol.clip.duration_s:g} s ({looping}): " + ", ".join(parts)
 
 
 def clip_cadence(protocol, stimulus, duration_s: float, fps: int) -> str:
@@ -160,5 +171,5 @@ def clip_cadence(protocol, stimulus, duration_s: float, fps: int) -> str:
     spec = protocol.gaits.get(gait_of(protocol, stimulus))
     if spec is None:
         return ""
-    fit = gait_fit("", spec.cadence_spm, spec.speed_mps, duration_s, fps)
+    fit = gait_fit("", spec.cadence_spm, spec.speed_mps, duration_s, fps, protocol.clip.loop)
     return f"{fit.effective_cadence_spm:.2f}"
