@@ -74,6 +74,8 @@ def run_demo(out: Path, quick: bool = False) -> dict[str, list[Path]]:
             made[f"render/{name}"] = [report.manifest, report.contact_sheet]
             print(f"  {name}: {len(report.rendered)} clips rendered, {len(report.skipped)} up to date → "
                   f"{report.contact_sheet}")
+            for line in report.warnings:   # e.g. a gait whose cadence the looping clip changes
+                print(f"    warning: {line}")
     with _step("survey"):
         from stimuli.survey import export_all
 

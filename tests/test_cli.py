@@ -46,6 +46,8 @@ def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     for step in ("design", "bodies", "physics", "render", "survey", "analysis"):
         assert f"[{step}] done" in out
     assert (tmp_path / "bodies" / "contact_sheet.png").stat().st_size > 10_000
+    # the bundled 4-s loops show the walk at 120 steps/min, not 112: the demo says so, as render does
+    assert "warning: gaits.walk: 112 steps/min does not fill the 4 s clip" in " ".join(out.split())
     assert (tmp_path / "exp2_com_vs_average" / "physics" / "fig7_walk.png").is_file()
     for name in ("exp1_shape_motion", "exp2_com_vs_average"):
         clips = list((tmp_path / "quick_clips" / name / "clips").glob("*.mp4"))
