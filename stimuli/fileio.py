@@ -116,3 +116,20 @@ def save_figure(fig, path: str | Path, dpi: float = 110) -> Path:
     with matplotlib.rc_context({"svg.hashsalt": "shapemotion"}):
         fig.savefig(path, dpi=dpi, metadata=FIGURE_METADATA.get(path.suffix.lower()))
     return path
+
+
+def source_digest(*folders: str, suffixes: tuple[str, ...] = (".py", ".json", ".bvh", ".vert", ".frag")) -> str:
+    """SHA-256 of the files (of ``suffixes``) in these folders of the ``stimuli`` package.
+
+    Caches key their results with it, so that a change to the code that makes them is never
+    answered with a result made by the old code (a hand-bumped version string was forgotten).
+    """
+    import hashlib
+
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for folder in folders:
+        for path in sorted((root / folder).glob("*")):
+            if path.suffix in suffixes:
+                digest.update(path.name.encode() + path.read_bytes())
+    return digest.hexdigest()

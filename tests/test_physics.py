@@ -443,3 +443,16 @@ def test_docstring_examples(module):
 
     result = doctest.testmod(importlib.import_module(module))
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_physics_cache_key_follows_the_code(tmp_path, monkeypatch):
+    """Cached COM motions were keyed by a hand-bumped version string: a change to the physics, motion or
+    body code now makes new results instead of reusing old ones."""
+    from stimuli.physics import protocol_step
+
+    motion = tmp_path / "m.npz"
+    motion.write_bytes(b"motion")
+    key = protocol_step._key(motion, {"id": "F_Hi1"}, "gains")
+    assert protocol_step._key(motion, {"id": "F_Hi1"}, "gains") == key
+    monkeypatch.setattr(protocol_step, "source_digest", lambda *folders: "other code")
+    assert protocol_step._key(motion, {"id": "F_Hi1"}, "gains") != key

@@ -40,6 +40,19 @@ def anny_cache_dir() -> Path:
     return Path(configured).expanduser() if configured else project_cache_root() / "anny"
 
 
+@functools.cache
+def code_digest() -> str:
+    """SHA-256 (first 16 hex digits) of this package's code, part of every body cache key.
+
+    A change to the fitter, the measurements or the rig makes other bodies, so bodies cached by
+    older code must not be reused: they were, under an unchanged version string, and a cached run
+    then reported BMIs that a fresh fit no longer gives (up to 0.01 apart), physics results with them.
+    """
+    from stimuli.fileio import source_digest
+
+    return source_digest("bodies", suffixes=(".py",))[:16]
+
+
 def anny_version() -> str:
     """Installed Anny version (part of every body cache key)."""
     try:

@@ -1,4 +1,4 @@
-"""On-disk cache of fitted bodies, keyed by (Anny version, fitter version, targets).
+"""On-disk cache of fitted bodies, keyed by (Anny version, fitter version and code, targets).
 
 A cached body is one ``.npz`` (mesh, rig, JSON metadata with anthropometry, segments and fit
 report), so a cached run needs neither torch nor the Anny model. Files are written atomically.
@@ -31,7 +31,7 @@ def cache_dir() -> Path:
 def cache_key(targets_key: dict, fitter_version: str) -> str:
     """Hex digest of everything that determines a body."""
     payload = {"backend": "anny", "anny": backend.anny_version(), "fitter": fitter_version,
-               "format": FORMAT_VERSION, "targets": targets_key}
+               "code": backend.code_digest(), "format": FORMAT_VERSION, "targets": targets_key}
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:24]
 
 

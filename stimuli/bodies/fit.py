@@ -159,7 +159,7 @@ def _start_grid(sex: str, age_years: float):
     """Heights and BMIs on a coarse (height, build) grid, once per sex and age (kept on disk too)."""
     hs, ss = np.array([0.15, 0.55]), np.linspace(0.0, BUILD_MAX, 9)
     path = (backend.project_cache_root() / "bodies"
-            / f"start_grid_{backend.anny_version()}_{FITTER_VERSION}_{sex}_{age_years:g}.npz")
+            / f"start_grid_{backend.anny_version()}_{FITTER_VERSION}_{backend.code_digest()}_{sex}_{age_years:g}.npz")
     try:
         with np.load(path) as data:
             return hs, ss, data["height"], data["bmi"]

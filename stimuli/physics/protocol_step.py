@@ -6,7 +6,7 @@ of gait cycles that fills the clip. The reference body (for b) is the body the N
 belongs to: its metadata ``height_m``/``bmi`` when present, else the mean height and BMI of the
 protocol's test actors of that sex. Each COM motion is cached under
 ``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the gains file and the code
-version, so a second run only copies files.
+that makes it (the body, motion and physics packages), so a second run only copies files.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from stimuli.errors import StimuliError
+from stimuli.fileio import source_digest
 
-CODE_VERSION = "physics-14"
 
 
 def cache_dir() -> Path:
@@ -87,7 +87,7 @@ def _key(motion_path: Path, actor: dict, gains_text: str) -> str:
     h.update(motion_path.read_bytes())
     h.update(json.dumps(actor, sort_keys=True).encode())
     h.update(gains_text.encode())
-    h.update(CODE_VERSION.encode())
+    h.update(source_digest("bodies", "motion", "physics").encode())   # the code that makes the result
     return h.hexdigest()[:20]
 
 

@@ -11,6 +11,7 @@ import re
 from pathlib import Path
 
 from stimuli.errors import StimuliError
+from stimuli.fileio import source_digest
 from stimuli.render.clip import Look
 
 # Bump when a change to the renderer changes pixels: every clip is then rendered again.
@@ -70,13 +71,7 @@ def upstream_digest() -> str:
     A change to the generator, the retargeting or the body fitter changes every clip's inputs,
     so a resumed render does not keep clips made by the old code.
     """
-    root = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for folder in ("bodies", "motion", "physics", "data", "render/shaders"):
-        for path in sorted((root / folder).glob("*")):
-            if path.suffix in (".py", ".json", ".bvh", ".vert", ".frag"):
-                digest.update(path.name.encode() + path.read_bytes())
-    return digest.hexdigest()
+    return source_digest("bodies", "motion", "physics", "data", "render/shaders")
 
 
 def files_digest(paths) -> str:
