@@ -106,7 +106,7 @@ def _register_power(subparsers) -> None:
     p = subparsers.add_parser("power", help="simulation-based power: rejection rate per effect (and a sweep over N)",
                               description="Simulate K data sets of N participants from a generative model, run "
                                           "the protocol's analysis on each, and report the rejection rate per "
-                                          "effect with a 95%% Clopper-Pearson interval. Several N give a sweep.")
+                                          "effect with a 95 % Clopper-Pearson interval. Several N give a sweep.")
     p.add_argument("dir", help="design directory")
     p.add_argument("--participants", type=int, nargs="+", required=True, metavar="N",
                    help="number(s) of participants; several values sweep over N")

@@ -94,7 +94,7 @@ def register(subparsers) -> None:
     p.add_argument("motions", type=Path, nargs="*", help="motion files (or use --protocol)")
     p.add_argument("--protocol", type=Path, help="strips of every actor's generated walk and jog on its body")
     p.add_argument("--skeleton-only", action="store_true", help="with --protocol: do not retarget onto bodies")
-    p.add_argument("--frames", type=int, default=8)
+    p.add_argument("--frames", type=int, default=8, help="poses per motion, evenly spaced over its first cycle (default 8)")
     p.add_argument("--out", type=Path, required=True, help="PNG file (or folder with --protocol)")
     p.set_defaults(func=run_strip)
 

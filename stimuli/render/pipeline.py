@@ -251,16 +251,17 @@ MAX_REASONS, MAX_EXAMPLES = 8, 3  # enough to act on; the rest is counted, never
 def failure_groups(protocol_name: str, failed: dict[str, str]) -> dict[str, list[str]]:
     """Failed clips grouped by reason, largest group first. A reason is the message without the
     protocol's name in front and with the clip's own id replaced by ``<clip>``, so that one cause
-    shared by many clips is one group.
+    shared by many clips is one group. Ids are sorted (workers finish in any order: the message of
+    the same failure must not change from run to run), equal-sized groups by reason.
 
-    >>> failure_groups("p", {"a-1": "p: a-1 has no motion", "b-2": "p: b-2 has no motion", "c": "x missing"})
+    >>> failure_groups("p", {"b-2": "p: b-2 has no motion", "a-1": "p: a-1 has no motion", "c": "x missing"})
     {'<clip> has no motion': ['a-1', 'b-2'], 'x missing': ['c']}
     """
     groups: dict[str, list[str]] = {}
-    for sid, message in failed.items():
+    for sid, message in sorted(failed.items()):
         reason = message.removeprefix(f"{protocol_name}: ").replace(sid, "<clip>")
         groups.setdefault(reason, []).append(sid)
-    return dict(sorted(groups.items(), key=lambda item: -len(item[1])))
+    return dict(sorted(groups.items(), key=lambda item: (-len(item[1]), item[0])))
 
 
 def _failure_message(protocol, report: RenderReport) -> str:
