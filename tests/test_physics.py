@@ -188,6 +188,28 @@ def test_cli_retarget_measures_b_against_the_motions_own_body(run_cli, walk, tmp
     assert code == 0 and "warning" not in err, err
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["reference_body"]["bmi"] == pytest.approx(24.0, abs=0.01) and report["b_m"] > 0
+    # a man shown with a woman's average: the reference stays the woman who made the motion
+    code, _, err = run_cli("physics", "retarget", "--motion", tmp_path / "avg.npz", "--sex", "M", "--height", "1.61",
+                           "--weight", "80", "--out", tmp_path / "m.npz", "--report", tmp_path / "m.json")
+    assert code == 0, err
+    assert json.loads((tmp_path / "m.json").read_text())["reference_body"]["sex"] == "F"
+
+
+def test_cli_retarget_out_of_reach_body_and_motion_warnings(run_cli, walk, tmp_path):
+    """A BMI the body model cannot reach says how to go on; a motion that is no loop or names no gait is
+    pointed out before the simulation."""
+    walk.save(tmp_path / "walk.npz")
+    args = ["physics", "retarget", "--motion", tmp_path / "walk.npz", "--sex", "F", "--height", "1.61",
+            "--weight", "140", "--reference-weight", "63", "--out", tmp_path / "com.npz"]
+    code, _, err = run_cli(*args)
+    assert code == 2 and "out of reach" in err and "--allow-nearest simulates 140 kg" in err
+    bare = walk.replace()
+    bare.metadata.pop("gait")
+    bare.metadata["looped"] = False
+    bare.save(tmp_path / "walk.npz")
+    code, out, err = run_cli(*args, "--allow-nearest")
+    assert code == 0 and "(walk gains)" in out, err
+    assert "is not a loop" in err and "records no gait: it is driven with the walking gains" in err
 
 
 def test_cli_rejects_non_physical_weight(run_cli, walk, tmp_path):

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from stimuli.commands.checks import in_range
+from stimuli.errors import StimuliError
 
 
 def register(subparsers) -> None:
@@ -25,6 +26,11 @@ def register(subparsers) -> None:
                    help="height of the motion's own body (m; default: the motion's metadata, else the target)")
     r.add_argument("--reference-weight", type=float, default=None,
                    help="weight of the motion's own body (kg; default: the motion's metadata, else the target)")
+    r.add_argument("--reference-sex", choices=["F", "M"], default=None,
+                   help="sex of the motion's own body (default: the motion's metadata, else --sex)")
+    r.add_argument("--allow-nearest", action="store_true",
+                   help="a height/BMI the body model cannot reach: simulate the requested weight on the nearest "
+                        "body shape it can (default: exit 2)")
     r.add_argument("--gait", choices=("walk", "jog"), default=None,
                    help="which gain set drives the ragdoll (default: the motion's metadata 'gait', else walk)")
     r.add_argument("--out", type=Path, required=True, help="COM motion .npz to write")
@@ -50,10 +56,13 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
+# Tracking looser than the acceptance bound of the reference body (3°) is worth a word.
+TRACKING_WARN_DEG = 3.0
+
+
 def _check_retarget_options(args: argparse.Namespace) -> None:
     """Heights in range and both output files writable, before the (minutes-long) simulation (weights:
     ``check_weight``)."""
-    from stimuli.errors import StimuliError
     from stimuli.fileio import check_output_file
     from stimuli.protocol import HEIGHT_RANGE_M
 
@@ -86,8 +95,6 @@ def _reference(args, motion) -> tuple[float, float]:
 
 
 def run_retarget(args: argparse.Namespace) -> int:
-    from stimuli.bodies import fit_body
-    from stimuli.errors import StimuliError
     from stimuli.motion import Motion
     from stimuli.physics.controller import Gains, motion_gait
     from stimuli.physics.inertia import check_weight
@@ -100,8 +107,11 @@ def run_retarget(args: argparse.Namespace) -> int:
     ref_h, ref_w = _reference(args, motion)
     in_range("--reference-height", ref_h, HEIGHT_RANGE_M, "m (the motion's own body, in metres)")
     check_weight(ref_w, ref_h, where="--reference-weight")
-    body = fit_body(args.sex, args.height, args.weight / args.height**2)
-    ref_body = fit_body(args.sex, ref_h, ref_w / ref_h**2)
+    for line in _motion_notes(args, motion):
+        print(f"warning: {line}", file=sys.stderr)
+    body = _body(args.sex, args.height, args.weight, args.allow_nearest, "--height/--weight")
+    ref_body = _body(_reference_sex(args, motion), ref_h, ref_w, args.allow_nearest,
+                     "the motion's own body (--reference-height/--reference-weight)")
     try:
         gains = Gains.load(gait=args.gait or motion_gait(motion))
         result = retarget(motion, body, args.weight, reference_body=ref_body, gains=gains, raise_on_fall=True)
@@ -113,9 +123,57 @@ def run_retarget(args: argparse.Namespace) -> int:
     if args.report:
         _write_report(args.report, result.report)
     rep = result.report
-    print(f"{args.out}: COM motion, b = {rep['b_m'] * 1000:.2f} mm, tracking RMS {rep['tracking_rms_deg_overall']:.2f}°, "
-          f"vs NoCOM {rep['nocom_rms_deg_mean']:.2f}°, wall/simulated {rep['wall_per_simulated']:.2f}")
+    print(f"{args.out}: COM motion ({gains.gait} gains), b = {rep['b_m'] * 1000:.2f} mm, tracking RMS "
+          f"{rep['tracking_rms_deg_overall']:.2f}°, vs NoCOM {rep['nocom_rms_deg_mean']:.2f}°, "
+          f"wall/simulated {rep['wall_per_simulated']:.2f}")
+    for line in _result_notes(rep, gains.gait):
+        print(f"warning: {line}", file=sys.stderr)
     return 0
+
+
+def _reference_sex(args, motion) -> str:
+    """--reference-sex, else the motion's own (an average of women's walks is a woman's motion), else --sex."""
+    meta = motion.metadata.get("sex")
+    return args.reference_sex or (meta if meta in ("F", "M") else None) or args.sex
+
+
+def _body(sex: str, height: float, weight: float, allow_nearest: bool, what: str):
+    """The fitted body; out of the model's reach, the nearest one with ``allow_nearest`` (the masses still
+    follow the requested weight), else an error that says how to go on."""
+    from stimuli.bodies import fit_body
+    from stimuli.bodies.api import BodyFitError
+
+    try:
+        return fit_body(sex, height, weight / height**2, on_unreachable="nearest" if allow_nearest else "raise")
+    except BodyFitError as exc:
+        raise StimuliError(f"{what}: {exc}; --allow-nearest simulates {weight:g} kg (Table-1 masses) on that "
+                           "nearest body shape") from None
+
+
+def _motion_notes(args, motion) -> list[str]:
+    """What the user should know about the motion before a simulation that takes a while."""
+    notes = []
+    if not motion.metadata.get("looped"):
+        notes.append(f"{args.motion} is not a loop (imported without --loop?): the simulation repeats it with a "
+                     "jump where its end meets its start; `shapemotion motion import FILE --loop` makes a loop")
+    if args.gait is None and not motion.metadata.get("gait"):
+        notes.append(f"{args.motion} records no gait: it is driven with the walking gains; give --gait jog for a "
+                     "run or jog")
+    return notes
+
+
+def _result_notes(rep: dict, gait: str) -> list[str]:
+    """Warnings about a finished simulation: a hopping walk (as `physics protocol` gives) or loose tracking."""
+    from stimuli.physics.protocol_step import WALK_FLIGHT_WARN, hop_text
+
+    notes = []
+    if gait == "walk" and (rep.get("flight_fraction") or 0) > WALK_FLIGHT_WARN:
+        notes.append(hop_text(rep["flight_fraction"]))
+    if rep["tracking_rms_deg_overall"] > TRACKING_WARN_DEG:
+        notes.append(f"tracking RMS {rep['tracking_rms_deg_overall']:.2f}° is above {TRACKING_WARN_DEG:g}° (the "
+                     "reference body's bound): the ragdoll follows this motion loosely — check the gait's gain set "
+                     "and the report's per-joint tracking_rms_deg")
+    return notes
 
 
 def _write_report(path: Path, report: dict) -> None:
@@ -134,7 +192,6 @@ def run_protocol(args: argparse.Namespace) -> int:
 
 
 def run_tune(args: argparse.Namespace) -> int:
-    from stimuli.errors import StimuliError
     from stimuli.physics.controller import GAINS_FILE, GAITS
     from stimuli.physics.tune import TARGET_RMS_DEG, tune_gaits
 

@@ -184,9 +184,14 @@ def hop_warnings(reports: list[dict]) -> list[str]:
     >>> hop_warnings([{"actor": "F_Hi1", "gait": "walk", "flight_fraction": 0.24}])
     ['COM_F_Hi1_walk: no foot on the floor for 24 % of the walk (it hops); see docs/readme_physics.md, Known limits']
     """
-    return [f"COM_{r['actor']}_{r['gait']}: no foot on the floor for {100 * r['flight_fraction']:.0f} % of the walk "
-            "(it hops); see docs/readme_physics.md, Known limits"
-            for r in reports if r.get("gait") == "walk" and (r.get("flight_fraction") or 0) > WALK_FLIGHT_WARN]
+    return [f"COM_{r['actor']}_{r['gait']}: {hop_text(r['flight_fraction'])}" for r in reports
+            if r.get("gait") == "walk" and (r.get("flight_fraction") or 0) > WALK_FLIGHT_WARN]
+
+
+def hop_text(flight_fraction: float) -> str:
+    """What a hopping simulated walk is told: its share of steps with no foot on the floor."""
+    return (f"no foot on the floor for {100 * flight_fraction:.0f} % of the walk (it hops); see "
+            "docs/readme_physics.md, Known limits")
 
 
 def _figures(protocol, reports: list[dict], out: Path, plot) -> list[Path]:
