@@ -80,10 +80,15 @@ def test_a_clip_that_does_not_loop_keeps_the_cadence(tmp_path, protocol_path, ru
     code, stdout, _ = run_cli("validate", pilot(tmp_path, protocol_path, loop=False, cycles=1))
     out = " ".join(stdout.split())
     assert code == 0 and "warning:" not in out
-    assert "clip 2 s (not looped: the exact cadence, cut at the clip's end): walk 1.80 cycle(s) at 108.0" in out
+    assert ("clip 2 s (not looped: the protocol's cadence to whole frames, cut at the end): walk 1.82 cycle(s) at "
+            "109.1 steps/min (protocol 108), jog 2.50 cycle(s) at 150.0") in out
     actor = Actor(id="F_Avg", label="Avg", sex="F", height_m=1.65, bmi=23.4)
     motion = actor_gait(actor, "jog", 150, 2.4, 77, 15.0, whole_cycles(2.0, 150))
     rot, _, scale = fit_loop(motion.rotations, motion.root_translation, motion.fps, 30, 15, loop=False)
     assert scale == 1.0 and len(rot) == 30 and motion.metadata["cadence_spm"] == pytest.approx(150, rel=0.01)
+    # what the manifest records is what the clip plays: the loop rounded to whole frames (24 fps: 151.6)
+    played = actor_gait(actor, "jog", 150, 2.4, 77, 24.0, whole_cycles(2.0, 150)).metadata["cadence_spm"]
+    fit = gait_fit("jog", 150, 2.4, 2.0, 24, loop=False)
+    assert fit.effective_cadence_spm == pytest.approx(played, rel=1e-9) and fit.effective_speed_mps == 2.4
     code, _, err = run_cli("validate", pilot(tmp_path, protocol_path, loop=False, cycles=3))
-    assert code == 2 and "shows 1.80 cycles of walk (108 steps/min), fewer than 3" in " ".join(err.split())
+    assert code == 2 and "shows 1.82 cycles of walk (108 steps/min), fewer than 3" in " ".join(err.split())

@@ -47,7 +47,7 @@ class Look:
     fov_deg: float = 40.0
     background: str = "#ffffff"
     labels: tuple[str, ...] = field(default_factory=tuple)
-    loop: bool = True           # whole loops over the clip (cadence rounded) or the exact cadence, cut
+    loop: bool = True           # whole loops over the clip (cadence rounded) or the own cadence, cut
 
     @property
     def n_frames(self) -> int:

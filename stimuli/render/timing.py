@@ -52,10 +52,17 @@ class GaitFit:
     cycles: int
     loop: bool = True
 
+    fps: float = 30.0
+
     @property
     def effective_cadence_spm(self) -> float:
-        """Steps per minute the clip shows: whole cycles over the clip, or (not looped) the protocol's."""
-        return self.cycles * 60.0 * STEPS_PER_CYCLE / self.clip_s if self.loop else self.cadence_spm
+        """Steps per minute the clip shows: whole cycles over the clip, or (not looped) the generator's
+        cadence — the protocol's with its loop rounded to whole frames (``generate``: 150 steps/min at
+        24 fps plays 151.6)."""
+        if self.loop:
+            return self.cycles * 60.0 * STEPS_PER_CYCLE / self.clip_s
+        frames = max(1, round(self.cycles * 60.0 * STEPS_PER_CYCLE / self.cadence_spm * self.fps))
+        return self.cycles * 60.0 * STEPS_PER_CYCLE * self.fps / frames
 
     @property
     def shown_cycles(self) -> float:
@@ -69,7 +76,8 @@ class GaitFit:
 
     @property
     def effective_speed_mps(self) -> float:
-        return self.speed_mps * self.ratio
+        """Belt speed: scaled with the cadence in a loop; the protocol's in a clip that does not loop."""
+        return self.speed_mps * self.ratio if self.loop else self.speed_mps
 
     @property
     def within_tolerance(self) -> bool:
@@ -81,7 +89,7 @@ def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float,
     """How a clip of ``duration_s`` at ``fps`` shows a gait of the given cadence and speed (``loop``:
     the protocol's ``clip.loop``; a clip that does not loop keeps the cadence and is cut at its end)."""
     return GaitFit(gait, float(cadence_spm), float(speed_mps), clip_seconds(duration_s, fps),
-                   whole_cycles(duration_s, cadence_spm), bool(loop))
+                   whole_cycles(duration_s, cadence_spm), bool(loop), float(fps))
 
 
 def protocol_fits(protocol, fps: int | None = None) -> list[GaitFit]:
@@ -139,7 +147,7 @@ def cadence_warnings(protocol, fps: int | None = None) -> list[str]:
     duration = protocol.clip.duration_s
     warnings = []
     for fit in fits:
-        if fit.within_tolerance:
+        if fit.within_tolerance or not fit.loop:   # not looped: only the generator's whole-frame rounding
             continue
         keep = _seconds(keeping_durations([fit.cadence_spm], duration, rate), rate)
         warnings.append(
@@ -159,7 +167,7 @@ def fits_summary(protocol) -> str:
     """One line for ``validate``: the cycles and cadence each declared gait is shown with."""
     parts = [f"{f.gait} {f.shown_cycles:.{0 if f.loop else 2}f} cycle(s) at {f.effective_cadence_spm:.1f} steps/min "
              f"(protocol {f.cadence_spm:g})" for f in protocol_fits(protocol)]
-    looping = "looped" if protocol.clip.loop else "not looped: the exact cadence, cut at the clip's end"
+    looping = "looped" if protocol.clip.loop else "not looped: the protocol's cadence to whole frames, cut at the end"
     return f"clip {protocol.clip.duration_s:g} s ({looping}): " + ", ".join(parts)
 
 
