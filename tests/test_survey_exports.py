@@ -175,6 +175,16 @@ def test_base_url_that_repeats_the_clips_folder_is_noted(tmp_path, run_cli):
     assert code == 0 and "ends in clips/" in err and "https://x.org/clips/clips/" in (tmp_path / "s.qsf").read_text()
 
 
+def test_practice_longer_than_its_pool_is_noted_for_qualtrics(tmp_path, run_cli):
+    """6 practice trials from 4 clips: Qualtrics draws them from copies and may repeat one back to back."""
+    text = (ROOT / "protocols" / "exp1_shape_motion.yaml").read_text().replace("per_block: 4", "per_block: 6", 1)
+    folder = design_folder(tmp_path, "exp1_shape_motion", text)
+    code, _, err = run_cli("survey", folder, "--format", "qsf", "--out", tmp_path / "s.qsf",
+                           "--video-base-url", "https://x.org")
+    flat_err = " ".join(err.split())
+    assert code == 0 and "6 trials from 4 clip(s)" in flat_err and "may show one twice in a row" in flat_err
+
+
 def test_cli_writes_each_format(tmp_path, run_cli):
     folder = design_folder(tmp_path, "exp1_shape_motion")
     code, out, err = run_cli("survey", folder, "--format", "qsf", "--out", tmp_path / "s.qsf",
@@ -231,7 +241,8 @@ def test_export_all_writes_every_format_for_render_and_demo(tmp_path):
     survey = folder / "survey"
     assert {p.name for p in survey.iterdir()} == {"survey.qsf", "survey_qualtrics.txt", "jspsych", "psychopy",
                                                   "qualtrics_manual_steps.txt"}
-    assert "Randomizer presenting all 4 Groups" in (survey / "qualtrics_manual_steps.txt").read_text()
+    steps = (survey / "qualtrics_manual_steps.txt").read_text()
+    assert steps.startswith("After importing survey_qualtrics.txt") and "Randomizer presenting all 4 Groups" in steps
     again = export_all(folder, video_base_url="https://x.org")      # a second run keeps the jsPsych folder
     assert "left as it is" in again[2].notes[0]
 

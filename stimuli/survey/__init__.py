@@ -47,6 +47,8 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
     if fmt in ("qsf", "qualtrics-txt") and not video_base_url:
         result.notes.append("no --video-base-url: clips are referenced by relative paths (clips/…), which a "
                             "survey hosted by Qualtrics cannot load; pass the URL where the clips are served")
+    if fmt in ("qsf", "qualtrics-txt"):
+        result.notes += practice_repeat_notes(source)
     doubled = doubled_folder(video_base_url, [s.file for s in source.stimuli])
     if doubled:
         result.notes.append(f"--video-base-url ends in {doubled}/ and every clip's file starts with {doubled}/, so "
@@ -73,6 +75,18 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
 
         write_psychopy(source, out)
     return result
+
+
+def practice_repeat_notes(source) -> list[str]:
+    """Blocks whose practice shows more trials than clips: Qualtrics draws them from whole copies of the
+    pool at random, so it may repeat a clip back to back, which ``trials.csv`` and jsPsych never do."""
+    from stimuli.survey.plan import build_plan
+
+    blocks = {b.label: b for g in build_plan(source) for r in g.rotations for b in r.blocks
+              if b.practice_count > len(b.practice)}
+    return [f"practice of block {label}: {b.practice_count} trials from {len(b.practice)} clip(s); Qualtrics picks "
+            f"them at random from copies of the clips and may show one twice in a row (trials.csv and the "
+            f"jsPsych site never do)" for label, b in blocks.items()]
 
 
 def doubled_folder(base_url: str | None, files: list[str]) -> str:
@@ -113,6 +127,8 @@ def export_all(folder: str | Path, out_dir: str | Path | None = None,
             result = ExportResult(target, fmt, [str(exc)])
         if result.manual_steps:
             steps = "\n".join(f"{n}. {step}" for n, step in enumerate(result.manual_steps, start=1))
-            atomic_write_text(out_dir / "qualtrics_manual_steps.txt", steps + "\n")
+            head = (f"After importing {name} (Qualtrics Advanced Format TXT) set these by hand; "
+                    f"{ALL_OUTPUTS['qsf']} needs none of them.\n\n")
+            atomic_write_text(out_dir / "qualtrics_manual_steps.txt", head + steps + "\n")
         results.append(result)
     return results
