@@ -72,11 +72,14 @@ def run_simulate(args) -> int:
     from analysis.io_files import atomic_write_text, check_output_file
     from analysis.io_writers import export_text
     from analysis.model_spec import load_model
-    from analysis.simulate import simulate_responses
+    from analysis.simulate import list_reuse_note, simulate_responses
     out = check_output_file(args.out, "--out", _inputs(args))
     design = load_design(args.dir)
     model = load_model(args.model, design)
     _note_null_model(args, model, design)
+    reuse = list_reuse_note(design, args.participants)
+    if reuse:   # stderr: the response file stays byte-identical
+        print(f"note: {reuse}", file=sys.stderr)
     sim = simulate_responses(design, model, args.participants, args.seed)
     atomic_write_text(out, export_text(sim, design, args.format, out.suffix, seed=args.seed))
     print(f"wrote {out}: {args.participants} participants, {int((~sim['practice']).sum())} test answers "
@@ -192,9 +195,12 @@ def run_analyze(args) -> int:
           f"{imp['participants']} participants")
     if imp["columns_not_imported"]:
         print(f"columns not imported: {', '.join(imp['columns_not_imported'])} (see exclusions.csv)")
+    from analysis.position_bias import position_line
     for section in summary["sections"]:
         significant = section.get("results", {}).get("significant")
         if significant is not None:
             print(f"{section['title']}: significant {', '.join(significant) or 'none'}")
+        if section.get("results", {}).get("check") == "position":
+            print(position_line(section["results"]))
     print(f"report: {Path(args.out) / 'report.html'}")
     return 0

@@ -5,8 +5,10 @@
   of the alternatives factor (METHOD) was chosen — the alternatives factor becomes a within factor of
   the ANOVA, as in the paper's Table 4;
 - ``votes`` (k-AFC, thesis): vote counts per alternative, χ² goodness of fit against equal shares;
-- ``rank_points`` (ranking, thesis): k points for first … 1 for last, Friedman test over participants,
-  binomial test of "ranked first".
+- ``rank_points`` (ranking, thesis): k points for first … 1 for last, Friedman test over participants.
+
+The tests with the participant as the unit ("ranked first", votes of repeated answers) are in
+:mod:`analysis.participant_tests`.
 
 :func:`anova_input` gives the ANOVA-ready long table (dv, within, between) of a design;
 :func:`measure_arrays` does the same for many simulated data sets at once (power analysis).
@@ -98,15 +100,6 @@ def friedman(points: pd.DataFrame, design: DesignInfo) -> dict:
     stat, p = stats.friedmanchisquare(*(wide[c].to_numpy() for c in alt.levels))
     return {"test": "Friedman", "statistic": float(stat), "df": len(alt.levels) - 1, "p": float(p), "n": len(wide),
             "mean_points": {c: float(wide[c].mean()) for c in alt.levels}}
-
-
-def binomial_first(successes: int, trials: int, k: int, level: str) -> dict:
-    """Exact binomial test: is ``level`` chosen (or ranked) first more often than chance 1/k?"""
-    result = stats.binomtest(int(successes), int(trials), 1.0 / k)
-    ci = result.proportion_ci(confidence_level=0.95)
-    return {"test": f"binomial ({level} first vs 1/{k})", "statistic": float(successes / trials if trials else 0),
-            "successes": int(successes), "n": int(trials), "p": float(result.pvalue), "ci_low": float(ci.low),
-            "ci_high": float(ci.high)}
 
 
 # -- the ANOVA view ------------------------------------------------------------------------------

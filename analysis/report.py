@@ -2,8 +2,10 @@
 
 Steps: import (explicit exclusions) → the design's dependent measure → the protocol's analysis (mixed /
 repeated-measures ANOVA with Tukey post-hoc for Likert and 2AFC designs; χ², Friedman and binomial
-tests for k-AFC votes and rankings) → paper-style tables (md, tex, csv, html, json) → figures (PNG, SVG,
-PDF) → the additional modern models → ``report.html`` (self-contained: figures inlined as PNG data).
+tests for k-AFC votes and rankings, participants as the unit: :mod:`analysis.choice_sections`) → paper-style
+tables (md, tex, csv, html, json) → figures (PNG, SVG, PDF) → the additional modern models → for choices, a
+position-bias check (:mod:`analysis.position_bias`) → ``report.html`` (self-contained: figures inlined as PNG
+data).
 Everything is written into a staging folder and moved into place at the end, so an error leaves no
 partial report.
 
@@ -26,10 +28,11 @@ import pandas as pd
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo, load_design
 from analysis.io_files import check_output_folder, replace_directory
-from analysis.measures import (anova_input, binomial_first, chi2_votes, friedman, percent_chosen, rank_points,
-                               vote_counts)
+from analysis.choice_sections import ranking_section, votes_section
+from analysis.measures import anova_input
+from analysis.position_bias import position_section
 from analysis.responses import ImportResult, import_responses
-from analysis.result_tables import ResultTable, render_results, write_results
+from analysis.result_tables import json_safe
 
 TABLE_FORMATS = ("md", "tex", "csv", "html", "json")
 MAX_INTERACTION_FIGURES = 8
@@ -106,15 +109,19 @@ def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bo
     if design.dependent_measure in ("mean_rating", "percent_chosen"):
         sections.append(_anova_section(design, imported.data, out))
     elif design.dependent_measure == "votes":
-        sections.append(_votes_section(design, imported.data, out))
+        sections.append(votes_section(design, imported.data, out))
     else:
-        sections.append(_ranking_section(design, imported.data, out))
+        sections.append(ranking_section(design, imported.data, out))
     if models:
         section = _models_section(design, imported.data, out)
         if section:
             sections.append(section)
-    summary = {"import": imported.summary(), "design": _design_summary(design),
-               "sections": [{k: v for k, v in s.items() if k in ("title", "results")} for s in sections]}
+    # last: a check of the data (left/right preference), not part of the paper's analysis
+    check = position_section(imported.data, design, out)
+    if check:
+        sections.append(check)
+    summary = json_safe({"import": imported.summary(), "design": _design_summary(design),
+                         "sections": [{k: v for k, v in s.items() if k in ("title", "results")} for s in sections]})
     (out / "summary.json").write_text(json.dumps(summary, indent=2, ensure_ascii=False, default=_plain) + "\n")
     context = {"summary": summary, "sections": sections, "imported": imported, "design": design,
                # object first: the Int64 row column cannot hold the "" shown for column-level notes
@@ -197,91 +204,6 @@ def _anova_note(design: DesignInfo) -> str:
     return (f"Percentage of trials each {design.alternatives.name} level was chosen per participant and cell. "
             f"The levels' percentages sum to 100 in every cell, so only effects that involve "
             f"{design.alternatives.name} are testable and shown." + common)
-
-
-def _votes_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
-    """k-AFC votes: counts per alternative, χ² goodness of fit overall and per cell, binomial for the top level."""
-    from analysis import figures
-    alt = design.alternatives
-    overall = vote_counts(data, design)
-    per_cell = vote_counts(data, design, by=design.within) if design.within else overall
-    per_cell.to_csv(out / "votes.csv", lineterminator="\n")
-    tests = [{"cell": "all", **chi2_votes(overall.iloc[0].to_numpy())}]
-    for cell, row in (per_cell.iterrows() if design.within else []):
-        tests.append({"cell": _cell_label(cell), **chi2_votes(row.to_numpy())})
-    top = overall.iloc[0].idxmax()
-    binom = binomial_first(int(overall.iloc[0][top]), int(overall.iloc[0].sum()), len(alt.levels), top)
-    pd.DataFrame(tests).to_csv(out / "vote_tests.csv", index=False, lineterminator="\n")
-    tables = _vote_tables(pd.concat([overall, per_cell]) if design.within else overall, tests, binom, top, design)
-    shares = percent_chosen(data, design)
-    figs = [(f"% of votes per {alt.name}", figures.choice_bars(shares, "percent", design,
-                                                                out / "figures" / "votes", "% of votes",
-                                                                100.0 / len(alt.levels)))]
-    results = {"votes": overall.iloc[0].to_dict(), "chi2": tests, "binomial": binom}
-    return {"title": f"k-AFC votes per {alt.name}", "html": render_results(tables, "html"), "figures": figs,
-            "results": results,
-            "note": "Vote counts are analysed with χ² goodness of fit (equal shares under chance).",
-            "files": write_results(tables, out / "vote_results") + ["votes.csv", "vote_tests.csv"]}
-
-
-def _cell_label(cell) -> str:
-    """``walk`` or, for several within factors, ``walk / 45``."""
-    return " / ".join(map(str, cell)) if isinstance(cell, tuple) else str(cell)
-
-
-def _vote_tables(counts: pd.DataFrame, tests: list[dict], binom: dict, top: str,
-                 design: DesignInfo) -> list[ResultTable]:
-    """The vote results as tables: counts and χ² per cell (all trials first), the binomial test of the top level."""
-    alt = design.alternatives
-    frame = counts.reset_index(drop=True).rename(columns=str)
-    frame.insert(0, "cell", [t["cell"] for t in tests])
-    frame = frame.assign(**{key: [t[name] for t in tests] for key, name in
-                            (("n", "n"), ("chi2", "statistic"), ("df", "df"), ("p", "p"))})
-    within = " × ".join(design.within)
-    per_cell = f", then per {within} cell" if within else ""
-    binomial = pd.DataFrame([{alt.name: top, "votes": binom["successes"], "n": binom["n"], "share": binom["statistic"],
-                              "p": binom["p"], "95% CI low": binom["ci_low"], "95% CI high": binom["ci_high"]}])
-    return [ResultTable("votes", f"Votes per {alt.name} level (all trials{per_cell}) and χ² goodness of fit "
-                                 f"against equal shares", frame),
-            ResultTable("binomial", f"Binomial test: {top} chosen more often than 1/{len(alt.levels)}", binomial)]
-
-
-def _ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
-    """Rankings: points (k … 1), Friedman test, binomial test of 'ranked first' per level."""
-    from analysis import figures
-    alt = design.alternatives
-    points = rank_points(data, design)
-    points.to_csv(out / "rank_points.csv", index=False, lineterminator="\n")
-    fried = friedman(points, design)
-    firsts = points.groupby(alt.name)["first"].sum().reindex(alt.levels)
-    n_rankings = int((~data["practice"]).sum())
-    binomials = [binomial_first(int(firsts[lv]), n_rankings, len(alt.levels), lv) for lv in alt.levels]
-    totals = points.groupby(alt.name)["points"].sum().reindex(alt.levels).rename("total points").to_frame()
-    totals["mean points"] = points.groupby(alt.name)["points"].mean().reindex(alt.levels)
-    totals["ranked first"] = firsts
-    tables = _ranking_tables(totals, binomials, fried, design)
-    figs = [(f"Mean rank points per {alt.name}", figures.choice_bars(points, "points", design,
-                                                                      out / "figures" / "rank_points",
-                                                                      "mean points", (len(alt.levels) + 1) / 2))]
-    results = {"totals": totals.reset_index().to_dict("records"), "friedman": fried, "binomial": binomials}
-    return {"title": f"Rankings of {alt.name}", "html": render_results(tables, "html"), "figures": figs,
-            "results": results, "note": "Points: k for first place … 1 for last (the thesis scored 4/3/2/1).",
-            "files": write_results(tables, out / "rank_results") + ["rank_points.csv"]}
-
-
-def _ranking_tables(totals: pd.DataFrame, binomials: list[dict], fried: dict, design: DesignInfo) -> list[ResultTable]:
-    """The ranking results as tables: points and 'ranked first' (binomial) per level, the Friedman test."""
-    alt = design.alternatives
-    k = len(alt.levels)
-    frame = totals.reset_index().assign(**{
-        "rankings": [b["n"] for b in binomials], "share first": [b["statistic"] for b in binomials],
-        "p": [b["p"] for b in binomials], "95% CI low": [b["ci_low"] for b in binomials],
-        "95% CI high": [b["ci_high"] for b in binomials]})
-    test = pd.DataFrame([{"test": fried["test"], "chi2": fried["statistic"], "df": fried["df"], "p": fried["p"],
-                          "participants": fried["n"]}])
-    return [ResultTable("rank_points", f"Rank points per {alt.name} ({k} for first … 1 for last) and binomial tests "
-                                       f"of 'ranked first' against chance (1/{k})", frame),
-            ResultTable("friedman", "Friedman test of the rank points, participants as blocks", test)]
 
 
 def _models_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict | None:

@@ -88,9 +88,27 @@ def _html(table: ResultTable) -> str:
 
 
 def _plain(value):
-    """JSON value of a cell: numpy scalars as Python numbers, NaN as null."""
+    """JSON value of a cell: numpy scalars as Python numbers; NaN and ±∞ (e.g. a t-test without any spread) as
+    null, as JSON has no such numbers.
+
+    >>> _plain(np.float64(0.5)), _plain(float("nan")), _plain(np.float64("inf"))
+    (0.5, None, None)
+    """
     value = value.item() if hasattr(value, "item") else value
-    return None if isinstance(value, float) and math.isnan(value) else value
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
+def json_safe(value):
+    """``value`` (dicts, lists, numpy scalars) with every number as JSON can hold it: NaN and ±∞ as null.
+
+    >>> json_safe({"t": np.float64("inf"), "rows": [np.int64(3), float("nan")]})
+    {'t': None, 'rows': [3, None]}
+    """
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return _plain(value)
 
 
 def _json(tables: list[ResultTable]) -> str:

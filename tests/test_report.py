@@ -85,8 +85,8 @@ def test_exp2_report_has_figure9_and_gee(reports):
 def test_vote_and_ranking_reports(reports):
     _, votes = reports["thesis_pointlight"]
     section = votes["sections"][0]["results"]
-    assert section["chi2"][0]["cell"] == "all" and section["chi2"][0]["p"] < 0.001
-    assert section["binomial"]["test"].startswith("binomial (58 first")
+    assert section["tests"][0]["cell"] == "all" and section["tests"][0]["p"] < 0.001
+    assert section["most_voted"]["label"] == "58" and section["most_voted"]["p"] < 0.001
     _, ranking = reports["thesis_validation"]
     friedman = ranking["sections"][0]["results"]["friedman"]
     assert friedman["test"] == "Friedman" and friedman["n"] == 16
@@ -190,7 +190,7 @@ def test_design_without_a_paper_figure_gets_a_cell_means_figure(tmp_path):
 
 
 def test_vote_and_ranking_results_are_tables_in_every_format(reports):
-    for name, stem, tables in (("thesis_pointlight", "vote_results", ["votes", "binomial"]),
+    for name, stem, tables in (("thesis_pointlight", "vote_results", ["votes", "most_voted"]),
                                ("thesis_validation", "rank_results", ["rank_points", "friedman"])):
         folder, summary = reports[name]
         report = folder / "report"
@@ -209,10 +209,218 @@ def test_vote_and_ranking_results_are_tables_in_every_format(reports):
             friedman = data["tables"][1]["rows"][0]
             assert friedman["chi2"] == results["friedman"]["statistic"] and friedman["p"] == results["friedman"]["p"]
             points = frame[frame["table"] == "rank_points"].set_index("SOURCE")
-            for total, binomial in zip(results["totals"], results["binomial"]):
+            for total, first in zip(results["totals"], results["ranked_first"]):
                 assert points.loc[total["SOURCE"], "total points"] == total["total points"]
-                assert points.loc[total["SOURCE"], "p"] == binomial["p"]
+                assert points.loc[total["SOURCE"], "p"] == first["p"]
         else:
             votes = frame[frame["table"] == "votes"].set_index("cell")
-            assert votes.loc["all", "chi2"] == results["chi2"][0]["statistic"]
-            assert data["tables"][1]["rows"][0]["p"] == results["binomial"]["p"]
+            assert votes.loc["all", "chi2"] == results["tests"][0]["statistic"]
+            assert data["tables"][1]["rows"][0]["p"] == results["most_voted"]["p"]
+
+
+# -- participants as the unit: position-bias check, ranked first, votes --------------------------------
+
+def _per_participant(tidy: pd.DataFrame, column: str, value) -> pd.Series:
+    """Share of each participant's test answers whose ``column`` equals ``value`` (from responses_tidy.csv)."""
+    tests = tidy[~tidy["practice"]]
+    return (tests[column] == value).groupby(tests["participant"]).mean()
+
+
+def test_2afc_report_has_a_position_bias_check_over_participants(reports, tmp_path):
+    """A model that prefers the left clip: the report says so, tested over participants (t-test of the
+    per-participant left share, as statsmodels computes it), with each participant's exact binomial."""
+    from scipy import stats
+    from statsmodels.stats.weightstats import DescrStatsW
+
+    from analysis.model_spec import parse_model
+    folder, _ = reports["exp2_com_vs_average"]
+    design = load_design(folder / "design")
+    sim = simulate_responses(design, parse_model({"name": "left", "choice": {"position_bias": 0.6}}, "<t>", design),
+                             16, seed=5)
+    (tmp_path / "r.csv").write_text(export_text(sim, design, "long"))
+    summary = analyze(folder / "design", tmp_path / "r.csv", tmp_path / "report", models=False)
+    report = tmp_path / "report"
+    tidy = pd.read_csv(report / "responses_tidy.csv", dtype={"participant": str})
+    left = _per_participant(tidy, "position", 1)
+    t, p, df = DescrStatsW(left.to_numpy()).ttest_mean(0.5)
+    low, high = DescrStatsW(left.to_numpy()).tconfint_mean()
+    section = summary["sections"][-1]
+    assert section["title"].startswith("Position-bias check") and "not part of the paper" in section["title"]
+    row = section["results"]["positions"][0]
+    assert row["position"] == "left" and row["choices"] == int((tidy.loc[~tidy["practice"], "position"] == 1).sum())
+    assert row["mean share"] == pytest.approx(left.mean()) and row["mean share"] > 0.6
+    assert (row["t"], row["df"], row["p"]) == (pytest.approx(t), df, pytest.approx(p)) and p < 0.001
+    assert (row["95% CI low"], row["95% CI high"]) == (pytest.approx(low), pytest.approx(high))
+    tables = json.loads((report / "position_bias.json").read_text())["tables"]
+    assert [t["name"] for t in tables] == ["position_shares", "position_participants"]
+    people = {r["participant"]: r for r in tables[1]["rows"]}
+    tests = tidy[~tidy["practice"]]
+    for person, rows in tests.groupby("participant"):
+        lefts = int((rows["position"] == 1).sum())
+        assert (people[person]["left"], people[person]["choices"]) == (lefts, len(rows))
+        assert people[person]["p"] == pytest.approx(stats.binomtest(lefts, len(rows), 0.5).pvalue)
+    html = (report / "report.html").read_text(encoding="utf-8")
+    assert (report / "position_bias.html").read_text() in html and "Position-bias check" in html
+    assert set(pd.read_csv(report / "position_bias.csv")["table"]) == {"position_shares", "position_participants"}
+
+
+def test_kafc_position_check_uses_friedman_and_likert_has_none(reports):
+    """6-AFC: per-position t-tests and a Friedman test of the per-participant position counts (scipy);
+    a Likert design has no screen positions and so no check."""
+    from scipy import stats
+    folder, summary = reports["thesis_pointlight"]
+    tidy = pd.read_csv(folder / "report" / "responses_tidy.csv", dtype={"participant": str})
+    tests = tidy[~tidy["practice"]]
+    counts = pd.crosstab(tests["participant"], tests["position"]).reindex(columns=range(1, 7), fill_value=0)
+    expected = stats.friedmanchisquare(*(counts[c].to_numpy() for c in counts))
+    check = summary["sections"][-1]["results"]
+    assert [r["position"] for r in check["positions"]] == list("ABCDEF")
+    assert check["test"]["chi2"] == pytest.approx(expected.statistic)
+    assert check["test"]["p"] == pytest.approx(expected.pvalue)
+    shares_a = _per_participant(tidy, "position", 1)
+    assert check["positions"][0]["p"] == pytest.approx(stats.ttest_1samp(shares_a, 1 / 6).pvalue)
+    assert not (reports["exp1_shape_motion"][0] / "report" / "position_bias.md").exists()
+    assert not any("Position" in s["title"] for s in reports["exp1_shape_motion"][1]["sections"])
+
+
+def test_votes_of_one_participant_are_not_pooled_as_independent(reports):
+    """Point-light: 10 votes per participant over all trials → Friedman over participants, not χ² of 160
+    pooled votes; one vote per participant in each PARAMETER cell → χ² there; the most voted level is
+    tested with the t-test of per-participant shares."""
+    from scipy import stats
+    folder, summary = reports["thesis_pointlight"]
+    results = summary["sections"][0]["results"]
+    tidy = pd.read_csv(folder / "report" / "responses_tidy.csv", dtype={"participant": str, "chosen": str})
+    tests = tidy[~tidy["practice"]]
+    counts = pd.crosstab(tests["participant"], tests["chosen"])
+    fried = stats.friedmanchisquare(*(counts[c].to_numpy() for c in counts))
+    overall = results["tests"][0]
+    assert (overall["cell"], overall["test"], overall["participants"]) == ("all", "Friedman", 16)
+    assert overall["statistic"] == pytest.approx(fried.statistic) and overall["p"] == pytest.approx(fried.pvalue)
+    for row in results["tests"][1:]:
+        cell = tests[tests["PARAMETER"] == row["cell"]]
+        votes = cell["chosen"].value_counts().reindex(["0.5", "12", "23.5", "35", "46.5", "58"], fill_value=0)
+        assert row["test"] == "chi-squared goodness of fit" and row["participants"] == 16
+        assert row["p"] == pytest.approx(stats.chisquare(votes.to_numpy()).pvalue)
+    most = results["most_voted"]
+    shares = _per_participant(tidy, "chosen", most["label"])
+    assert most["test"] == "one-sample t-test over participants" and most["participants"] == 16
+    assert most["p"] == pytest.approx(stats.ttest_1samp(shares, 1 / 6).pvalue)
+    frame = pd.read_csv(folder / "report" / "vote_results.csv")
+    assert frame.loc[frame["table"] == "votes", "test"].tolist()[:2] == ["Friedman", "chi-squared goodness of fit"]
+
+
+RANKING_PROTOCOL = """
+name: rank_by_body
+title: Which walk suits this body best?
+seed: 11
+participants: 8
+actors:
+  - {id: H1, label: H1, sex: F, height_m: 1.62, bmi: 34.0, body_fat_pct: 40}
+  - {id: H2, label: H2, sex: M, height_m: 1.80, bmi: 31.0, body_fat_pct: 30}
+factors:
+  - {name: BODY, role: within, levels: [H1, H2], maps_to: body}
+  - name: SOURCE
+    role: alternatives
+    maps_to: source
+    levels: [lean, gen, mod]
+    level_settings: {lean: {motion: lean_walk}, gen: {motion: generator}, mod: {motion: modifier}}
+gaits:
+  walk: {cadence_spm: 108, speed_mps: 1.1}
+display: {layout: row, labels: [A, B, C]}
+alternatives: {arrangements: latin_square, counterbalance: between}
+clip: {duration_s: 2, cycles: 1, fps: 15, width: 480, height: 180,
+       camera: {azimuth_deg: 30, elevation_deg: 5, distance_m: 8.0, fov_deg: 40}}
+blocks: {by: [], order: fixed}
+repetitions: 1
+response: {type: ranking, question: Rank the walks.}
+analysis: {dependent_measure: rank_points, alpha: 0.05, posthoc: none}
+"""
+
+
+@pytest.fixture(scope="module")
+def ranking_by_body(tmp_path_factory):
+    """A ranking design with a within factor (BODY): 16 participants rank twice, once per body."""
+    from stimuli.cli import main
+
+    from analysis.model_spec import parse_model
+    folder = tmp_path_factory.mktemp("rank_by_body")
+    (folder / "p.yaml").write_text(RANKING_PROTOCOL)
+    assert main(["design", str(folder / "p.yaml"), "--out", str(folder / "design")]) == 0
+    design = load_design(folder / "design")
+    model = parse_model({"name": "m", "effects": [{"term": "SOURCE", "values": {"lean": -1.0, "mod": 0.6}}]},
+                        "<t>", design)
+    (folder / "r.csv").write_text(export_text(simulate_responses(design, model, 16, seed=2), design, "long"))
+    summary = analyze(folder / "design", folder / "r.csv", folder / "report", models=False)
+    tidy = pd.read_csv(folder / "report" / "responses_tidy.csv", dtype={"participant": str})
+    return folder / "report", summary["sections"][0]["results"], tidy[~tidy["practice"]]
+
+
+def test_ranked_first_is_tested_over_participants(ranking_by_body):
+    """32 rankings from 16 people: each participant's share of rankings with the level first, one-sample
+    t-test against 1/3 (statsmodels) — not an exact binomial of 32 'independent' rankings."""
+    from statsmodels.stats.weightstats import DescrStatsW
+    _, results, tidy = ranking_by_body
+    first = tidy["ranking"].str.split(">").str[0]
+    for test in results["ranked_first"]:
+        shares = (first == test["label"]).groupby(tidy["participant"]).mean().to_numpy()
+        t, p, df = DescrStatsW(shares).ttest_mean(1 / 3)
+        assert test["test"] == "one-sample t-test over participants"
+        assert (test["participants"], test["n"], test["successes"]) == (16, 32, int((first == test["label"]).sum()))
+        assert (test["t"], test["p"], test["df"]) == (pytest.approx(t), pytest.approx(p), df)
+    assert results["friedman"]["n"] == 16    # the Friedman test keeps participants as blocks
+
+
+def test_rankings_are_broken_down_per_within_cell(ranking_by_body):
+    """Per BODY: points and firsts from the tidy rankings, the exact binomial (one ranking per participant
+    and cell) and a Friedman test per cell (scipy); the cells add up to the pooled totals."""
+    from scipy import stats
+    report, results, tidy = ranking_by_body
+    tables = json.loads((report / "rank_results.json").read_text())["tables"]
+    assert [t["name"] for t in tables] == ["rank_points", "friedman", "rank_points_by_cell"]
+    rows = {(r["cell"], r["SOURCE"]): r for r in tables[2]["rows"]}
+    for body, cell in tidy.groupby("BODY"):
+        order = cell["ranking"].str.split(">")
+        points = {lv: int(sum(3 - o.index(lv) for o in order)) for lv in ("lean", "gen", "mod")}
+        for lv in points:
+            firsts = int(sum(o[0] == lv for o in order))
+            row = rows[(body, lv)]
+            assert (row["total points"], row["ranked first"], row["rankings"]) == (points[lv], firsts, 16)
+            assert row["test"] == "exact binomial over participants"
+            assert row["p"] == pytest.approx(stats.binomtest(firsts, 16, 1 / 3).pvalue)
+        wide = pd.DataFrame([{lv: 3 - o.index(lv) for lv in o} for o in order])
+        expected = stats.friedmanchisquare(*(wide[c] for c in ("lean", "gen", "mod")))
+        fried = next(r for r in tables[1]["rows"] if r["cell"] == body)
+        assert fried["chi2"] == pytest.approx(expected.statistic) and fried["p"] == pytest.approx(expected.pvalue)
+    for total in results["totals"]:
+        assert total["total points"] == sum(rows[(b, total["SOURCE"])]["total points"] for b in ("H1", "H2"))
+    assert "pooled over BODY" in tables[0]["caption"]
+
+
+def test_participant_tests_match_scipy_and_statsmodels():
+    """The tests on their own: binomial with one answer each, t-test with several, Friedman for any k."""
+    import numpy as np
+    from scipy import stats
+    from statsmodels.stats.weightstats import DescrStatsW
+
+    from analysis.participant_tests import friedman_counts, share_test, votes_test
+    one = share_test([1, 0, 1, 1, 0, 1, 1, 1, 0, 1], [1] * 10, 4, "x")
+    assert one["p"] == pytest.approx(stats.binomtest(7, 10, 0.25).pvalue) and one["share"] == 0.7
+    hits, answers = np.array([3, 1, 4, 2, 2, 4]), np.array([4, 4, 4, 4, 3, 4])
+    several = share_test(hits, answers, 2, "left")
+    t, p, _ = DescrStatsW(hits / answers).ttest_mean(0.5)
+    assert (several["t"], several["p"], several["n"]) == (pytest.approx(t), pytest.approx(p), 23)
+    everyone = share_test([5, 5, 5], [5, 5, 5], 2, "left")   # no spread: p 0, not an error or silence
+    assert everyone["p"] == 0.0 and everyone["t"] == float("inf")
+    rng = np.random.default_rng(3)
+    for k in (3, 5):
+        counts = rng.integers(0, 6, size=(12, k))
+        expected = stats.friedmanchisquare(*counts.T)
+        got = friedman_counts(counts)
+        assert got["statistic"] == pytest.approx(expected.statistic) and got["p"] == pytest.approx(expected.pvalue)
+    pairs = np.array([[3, 1], [2, 2], [4, 0], [1, 3], [3, 1], [4, 1]])   # k = 2: the sign test's χ², ties dropped
+    plus, minus = int((pairs[:, 0] > pairs[:, 1]).sum()), int((pairs[:, 0] < pairs[:, 1]).sum())
+    assert friedman_counts(pairs)["statistic"] == pytest.approx((plus - minus) ** 2 / (plus + minus))
+    single = votes_test(np.eye(3)[[0, 0, 1, 0, 2, 0]])
+    assert single["test"] == "chi-squared goodness of fit" and single["p"] == pytest.approx(
+        stats.chisquare([4, 1, 1]).pvalue)
