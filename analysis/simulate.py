@@ -42,26 +42,9 @@ def trial_plan(design: DesignInfo, participants: int) -> TrialPlan:
     (as the protocol's ``assignment: balanced`` promises), each reusing its own design participants in
     order. N must be a positive multiple of the number of groups.
     """
-    if design.trials is None:
-        raise AnalysisError(f"{design.directory}: trials.csv is missing; it lists each participant's trials")
-    where = design.directory / "trials.csv"
-    trials = design.trials.copy()
-    for column in ("practice", "trial", "repetition"):
-        if column not in trials:
-            raise AnalysisError(f"{where}: column {column!r} is missing; simulation needs it")
-    kind = trials["kind"] if "kind" in trials else np.where(_as_bool(trials["practice"]), "practice", "test")
-    trials = trials[pd.Series(kind, index=trials.index) != "familiarization"]
-    trials["practice"] = _as_bool(trials["practice"])
-    for column in ("participant", "trial", "repetition"):
-        trials[column] = _integers(trials[column], column, where)
-    n_groups = max(1, len(design.test_conditions[design.between].drop_duplicates())) if design.between else 1
-    if participants < 1:
-        raise AnalysisError(f"--participants: expected a positive number of participants, got {participants}")
-    if participants % n_groups:
-        raise AnalysisError(f"--participants: {participants} participants cannot be balanced over {n_groups} "
-                            f"between-subject groups; use a multiple of {n_groups}")
+    trials = _design_trials(design)
     parts = []
-    for p, base in enumerate(_assign(design, trials, participants), start=1):
+    for p, base in enumerate(_lists(design, trials, participants), start=1):
         source = trials[trials["participant"] == base].copy()
         source["participant"] = p
         parts.append(source)
@@ -77,6 +60,61 @@ def trial_plan(design: DesignInfo, participants: int) -> TrialPlan:
     groups = plan.groupby("participant")[design.between].first().reset_index() if design.between else \
         pd.DataFrame({"participant": range(1, participants + 1)})
     return TrialPlan(plan, stimuli, matrix, groups)
+
+
+def _design_trials(design: DesignInfo) -> pd.DataFrame:
+    """trials.csv without familiarization rows, with whole-number participant, trial and repetition."""
+    if design.trials is None:
+        raise AnalysisError(f"{design.directory}: trials.csv is missing; it lists each participant's trials")
+    where = design.directory / "trials.csv"
+    trials = design.trials.copy()
+    for column in ("practice", "trial", "repetition"):
+        if column not in trials:
+            raise AnalysisError(f"{where}: column {column!r} is missing; simulation needs it")
+    kind = trials["kind"] if "kind" in trials else np.where(_as_bool(trials["practice"]), "practice", "test")
+    trials = trials[pd.Series(kind, index=trials.index) != "familiarization"]
+    trials["practice"] = _as_bool(trials["practice"])
+    for column in ("participant", "trial", "repetition"):
+        trials[column] = _integers(trials[column], column, where)
+    return trials
+
+
+def _lists(design: DesignInfo, trials: pd.DataFrame, participants: int) -> list[int]:
+    """The design participant whose list each simulated participant gets, after checking ``participants``."""
+    n_groups = max(1, len(design.test_conditions[design.between].drop_duplicates())) if design.between else 1
+    if participants < 1:
+        raise AnalysisError(f"--participants: expected a positive number of participants, got {participants}")
+    if participants % n_groups:
+        raise AnalysisError(f"--participants: {participants} participants cannot be balanced over {n_groups} "
+                            f"between-subject groups; use a multiple of {n_groups}")
+    return _assign(design, trials, participants)
+
+
+def list_reuse_note(design: DesignInfo, participants: int) -> str | None:
+    """A note when ``participants`` exceeds the trial lists of the design (None otherwise).
+
+    Simulated people beyond the design's N reuse its lists (:func:`trial_plan`), so several of them see the
+    same trial order and, with ``counterbalance: between``, the same arrangements — worth knowing before
+    reading a simulated study as if it had N distinct lists.
+
+    >>> list_reuse_note(load_design("my_afc"), 16)                       # doctest: +SKIP
+    'my_afc/trials.csv lists trials for 8 participants; simulating 16 reuses their lists (each used 2 times),
+    simulated → design participant: 9→1, 10→2, 11→3, …, 16→8. For distinct lists, make the design for 16: …'
+    """
+    trials = _design_trials(design)
+    n_design = trials["participant"].nunique()
+    if participants <= n_design:
+        return None
+    lists = _lists(design, trials, participants)
+    extra = [f"{p}→{b}" for p, b in enumerate(lists, start=1) if p > n_design]
+    shown = ", ".join(extra if len(extra) <= 4 else [*extra[:3], "…", extra[-1]])
+    planned = f" (design.json plans {design.participants})" if design.participants not in (0, n_design) else ""
+    uses = sorted(set(Counter(lists).values()))
+    times = f"each used {uses[0]} times" if len(uses) == 1 else f"each used {uses[0]} to {uses[-1]} times"
+    return (f"{design.directory / 'trials.csv'} lists trials for {n_design} participants{planned}; simulating "
+            f"{participants} reuses their lists ({times}), simulated → design participant: "
+            f"{shown}. For distinct lists, make the design for {participants}: "
+            f"`shapemotion design PROTOCOL --participants {participants}`")
 
 
 def _assign(design: DesignInfo, trials: pd.DataFrame, participants: int) -> list[int]:

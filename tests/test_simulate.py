@@ -169,3 +169,20 @@ def test_null_model_has_no_condition_effects(designs):
     plan = trial_plan(design, 64)
     values = measure_arrays(design, plan.test, draw(design, model, plan, np.random.default_rng(1), sims=20))
     assert abs(values.mean() - 50.0) < 1.0   # each METHOD chosen half of the time
+
+
+def test_simulating_more_participants_than_the_design_notes_the_reused_lists(designs, run_cli, tmp_path):
+    """32 simulated people on a design made for 16: a note names the design's N and which lists are reused;
+    the file is the same bytes as without the note (the API writes no note)."""
+    design = designs["exp2_com_vs_average"]
+    code, out, err = run_cli("simulate", str(design.directory), "--participants", "32", "--seed", "4",
+                             "--format", "long", "--out", str(tmp_path / "r.csv"))
+    err = " ".join(err.split())   # the CLI wraps long messages
+    assert code == 0 and "2048 test answers" in out
+    assert "lists trials for 16 participants" in err and "simulating 32 reuses their lists (each used 2 times)" in err
+    assert "17→1, 18→2, 19→3, …, 32→16" in err and "--participants 32" in err
+    sim = simulate_responses(design, load_model(None, design), 32, seed=4)
+    assert (tmp_path / "r.csv").read_text() == export_text(sim, design, "long")
+    code, _, err = run_cli("simulate", str(design.directory), "--participants", "16", "--seed", "4",
+                           "--out", str(tmp_path / "s.csv"))
+    assert code == 0 and "reuses" not in err
