@@ -27,6 +27,7 @@ from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.measures import measure_arrays, within_levels
 from analysis.model_spec import GenerativeModel
+from analysis.participant_tests import votes_test
 from analysis.simulate import TrialPlan, check_seed, draw, trial_plan
 
 CHUNK = 250   # data sets per vectorised batch: bounded memory, frequent progress updates
@@ -135,21 +136,24 @@ def _anova_rejections(design, model, plan, rng, sims, alpha, progress, correctio
 
 
 def _nonparametric(design, model, plan, rng, sims, alpha, progress):
-    """χ² on the vote counts (k-AFC) or Friedman on rank points (rankings), one test per data set."""
+    """The report's test of each data set: equal vote shares (k-AFC: χ² with one vote per participant,
+    else Friedman of the per-participant counts, :func:`analysis.participant_tests.votes_test`) or
+    Friedman on rank points (rankings)."""
     k = len(design.alternatives.levels)
+    trials = _trials_per_participant(plan)
     hits = 0
     for size in _chunks(sims, progress, f"N={len(plan.groups)}"):
         values = measure_arrays(design, plan.test, draw(design, model, plan, rng, sims=size))
         per_level = values.reshape(size, values.shape[1], -1, k).mean(axis=2)      # sims × n × k
         for one in per_level:
             if design.dependent_measure == "votes":
-                counts = one.sum(axis=0) / 100.0 * _trials_per_participant(plan)
-                p = stats.chisquare(counts).pvalue
+                # whole votes: float noise in the shares would break the Friedman test's ties
+                p = votes_test(np.rint(one / 100.0 * trials))["p"]
             else:
                 p = stats.friedmanchisquare(*one.T).pvalue if len(one) > 1 else 1.0
             hits += int(np.nan_to_num(p, nan=1.0) < alpha)
-    name = f"{design.alternatives.name} ({'χ² votes' if design.dependent_measure == 'votes' else 'Friedman'})"
-    return [name], [hits]
+    test = ("χ² votes" if trials == 1 else "Friedman votes") if design.dependent_measure == "votes" else "Friedman"
+    return [f"{design.alternatives.name} ({test})"], [hits]
 
 
 def _trials_per_participant(plan: TrialPlan) -> int:
