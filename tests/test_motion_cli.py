@@ -64,6 +64,28 @@ def test_metrics_of_a_raw_capture_judge_contact_from_its_own_floor(tmp_path, cap
     assert 1.0 < q["stance_height_cm"] < 2.5 and "stand 1.6 cm above y = 0" in err
 
 
+def test_average_checks_and_explains_the_body_it_records(tmp_path, capsys):
+    """A height of 160 (centimetres) made an average 'of 80.8 m'; a word made numpy raise; mixed sexes or a
+    missing BMI left the average without a body, silently."""
+    from stimuli.motion.generate import GaitParams, generate
+
+    walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.6, fps=30, cycles=2)
+    for name, meta in (("f", {"sex": "F", "bmi": 22.0}), ("m", {"sex": "M", "bmi": None}),
+                       ("cm", {"height_m": 160}), ("word", {"height_m": "tall"})):
+        bad = walk.replace()
+        bad.metadata.update(meta)
+        bad.save(tmp_path / f"{name}.npz")
+    for name, message in (("cm", "motion 2: metadata height_m is 160; expected a number within 1.2–2.3 m"),
+                          ("word", "motion 2: metadata height_m is 'tall'")):
+        assert main(["motion", "average", str(tmp_path / "f.npz"), str(tmp_path / f"{name}.npz"),
+                     "--out", str(tmp_path / "a.npz")]) == 2
+        assert message in " ".join(capsys.readouterr().err.split()) and not (tmp_path / "a.npz").exists()
+    assert main(["motion", "average", str(tmp_path / "f.npz"), str(tmp_path / "m.npz"), "--out", str(tmp_path / "a.npz")]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "sexes differ (F, M): the average records no sex" in err and "motion(s) 2 record no bmi" in err
+    assert "sex" not in Motion.load(tmp_path / "a.npz").metadata
+
+
 @pytest.mark.parametrize("args,msg", [
     (["motion", "import", "{bad}", "--out", "{out}"], "not a readable BVH"),
     (["motion", "import", "{short}", "--loop", "--out", "{out}"], "fewer than one whole gait cycle"),

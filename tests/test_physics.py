@@ -478,3 +478,22 @@ def test_physics_cache_key_follows_the_code(tmp_path, monkeypatch):
     assert protocol_step._key(motion, {"id": "F_Hi1"}, "gains") == key
     monkeypatch.setattr(protocol_step, "source_digest", lambda *folders: "other code")
     assert protocol_step._key(motion, {"id": "F_Hi1"}, "gains") != key
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("weight_kg", "heavy", "metadata weight_kg is 'heavy'; expected a number (kilograms)"),
+    ("height_m", "tall", "metadata height_m is 'tall'; expected a number (metres)"),
+    ("bmi", [20, 30], "metadata bmi is [20, 30]; expected a number (kg/m²)"),
+    ("height_m", 161, "metadata height_m: 161 is outside the human range"),
+    ("gait", "skip", "metadata gait: controller gains exist for gaits walk, jog (or run), not 'skip'"),
+])
+def test_cli_retarget_names_a_bad_metadata_field(run_cli, walk, tmp_path, field, value, message):
+    """Body figures read from the motion's metadata crashed with TypeError or were blamed on options the user
+    never gave (--reference-height: 161 …)."""
+    bad = walk.replace()
+    bad.metadata.update({"bmi": 24.4, field: value})
+    bad.save(tmp_path / "walk.npz")
+    code, _, err = run_cli("physics", "retarget", "--motion", tmp_path / "walk.npz", "--sex", "F", "--height", "1.61",
+                           "--weight", "63", "--out", tmp_path / "com.npz")
+    assert code == 2 and "Traceback" not in err and message in " ".join(err.split()), err
+    assert not (tmp_path / "com.npz").exists()

@@ -247,7 +247,7 @@ def _height_range() -> tuple[float, float]:
 
 
 def run_average(args: argparse.Namespace) -> int:
-    from stimuli.motion.average import average_motion
+    from stimuli.motion.average import average_motion, mean_body_notes
 
     _check_npz_out(args.out)
     at_least("--cycles", args.cycles, 1)
@@ -258,6 +258,8 @@ def run_average(args: argparse.Namespace) -> int:
                            + ", ".join(f"{p}: {g}" for p, g in gaits.items()) + "); average one gait at a time")
     avg = average_motion(motions, cycles=args.cycles)
     print(avg.save(args.out))
+    for note in mean_body_notes(motions):
+        print(f"note: {note}", file=sys.stderr)
     return 0
 
 

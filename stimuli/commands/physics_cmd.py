@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -74,24 +75,40 @@ def _check_retarget_options(args: argparse.Namespace) -> None:
     check_output_file(args.report, "--report")
 
 
-def _reference(args, motion) -> tuple[float, float]:
-    """Height (m) and weight (kg) of the motion's own body: the options, else the motion's metadata,
-    else the target's (then b = 0, and a warning says so: the COM change is measured against it)."""
-    meta = motion.metadata
-    height = args.reference_height or meta.get("height_m") or args.height
+def _reference(args, motion) -> tuple[float, float, str, str]:
+    """Height (m) and weight (kg) of the motion's own body, and where each came from (for messages):
+    the options, else the motion's metadata, else the target's (then b = 0, and a warning says so: the
+    COM change is measured against it)."""
+    height, h_from = args.reference_height, "--reference-height"
+    if height is None:
+        height, h_from = _meta_number(args.motion, motion, "height_m", "metres"), f"{args.motion}: metadata height_m"
+    if height is None:
+        height, h_from = args.height, "--height"
     if args.reference_weight is not None:
-        weight = args.reference_weight
-    elif meta.get("weight_kg") is not None:
-        weight = meta["weight_kg"]
-    elif meta.get("bmi") is not None:
-        weight = float(meta["bmi"]) * float(height) ** 2
-    else:
-        weight = args.weight
-        print(f"warning: {args.motion} records no weight or BMI of its own body, so the target's "
-              f"{args.weight:g} kg is taken as the reference weight"
-              + (" (and its height): b = 0" if height == args.height else "")
-              + "; give --reference-weight (and --reference-height) for the motion's own body", file=sys.stderr)
-    return float(height), float(weight)
+        return float(height), float(args.reference_weight), h_from, "--reference-weight"
+    weight = _meta_number(args.motion, motion, "weight_kg", "kilograms")
+    if weight is not None:
+        return float(height), weight, h_from, f"{args.motion}: metadata weight_kg"
+    bmi = _meta_number(args.motion, motion, "bmi", "kg/m²")
+    if bmi is not None:
+        return float(height), bmi * float(height) ** 2, h_from, f"{args.motion}: metadata bmi"
+    print(f"warning: {args.motion} records no weight or BMI of its own body, so the target's "
+          f"{args.weight:g} kg is taken as the reference weight"
+          + (" (and its height): b = 0" if height == args.height else "")
+          + "; give --reference-weight (and --reference-height) for the motion's own body", file=sys.stderr)
+    return float(height), float(args.weight), h_from, "--weight"
+
+
+def _meta_number(path, motion, field: str, unit: str) -> float | None:
+    """A body figure from the motion's metadata (None when absent); anything but a finite number is an error
+    naming the file and field, where it used to end in a TypeError."""
+    value = motion.metadata.get(field)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise StimuliError(f"{path}: metadata {field} is {value!r}; expected a number ({unit}), or give the "
+                           f"reference body with --reference-height/--reference-weight")
+    return float(value)
 
 
 def run_retarget(args: argparse.Namespace) -> int:
@@ -104,16 +121,20 @@ def run_retarget(args: argparse.Namespace) -> int:
     _check_retarget_options(args)
     check_weight(args.weight, args.height, where="--weight")
     motion = Motion.load(args.motion)
-    ref_h, ref_w = _reference(args, motion)
-    in_range("--reference-height", ref_h, HEIGHT_RANGE_M, "m (the motion's own body, in metres)")
-    check_weight(ref_w, ref_h, where="--reference-weight")
+    ref_h, ref_w, h_from, w_from = _reference(args, motion)
+    in_range(h_from, ref_h, HEIGHT_RANGE_M, "m (the motion's own body, in metres)")
+    check_weight(ref_w, ref_h, where=w_from)
     for line in _motion_notes(args, motion):
         print(f"warning: {line}", file=sys.stderr)
     body = _body(args.sex, args.height, args.weight, args.allow_nearest, "--height/--weight")
     ref_body = _body(_reference_sex(args, motion), ref_h, ref_w, args.allow_nearest,
-                     "the motion's own body (--reference-height/--reference-weight)")
+                     f"the motion's own body ({h_from}, {w_from})")
     try:
-        gains = Gains.load(gait=args.gait or motion_gait(motion))
+        gait = args.gait or motion_gait(motion)
+    except StimuliError as exc:
+        raise StimuliError(f"{args.motion}: metadata gait: {exc}; or choose the gain set with --gait") from None
+    try:
+        gains = Gains.load(gait=gait)
         result = retarget(motion, body, args.weight, reference_body=ref_body, gains=gains, raise_on_fall=True)
     except RagdollFellError as exc:
         if args.report:
@@ -132,9 +153,15 @@ def run_retarget(args: argparse.Namespace) -> int:
 
 
 def _reference_sex(args, motion) -> str:
-    """--reference-sex, else the motion's own (an average of women's walks is a woman's motion), else --sex."""
+    """--reference-sex, else the motion's own (an average of women's walks is a woman's motion), else --sex
+    (with a warning when the metadata names a sex that is not F or M)."""
     meta = motion.metadata.get("sex")
-    return args.reference_sex or (meta if meta in ("F", "M") else None) or args.sex
+    if args.reference_sex or meta in ("F", "M"):
+        return args.reference_sex or meta
+    if meta is not None:
+        print(f"warning: {args.motion}: metadata sex is {meta!r}, not F or M; the reference body takes --sex "
+              f"{args.sex} (give --reference-sex)", file=sys.stderr)
+    return args.sex
 
 
 def _body(sex: str, height: float, weight: float, allow_nearest: bool, what: str):

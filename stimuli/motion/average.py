@@ -58,20 +58,44 @@ def _path(ref: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
     return dtw_ndim.warping_path(ref.astype(np.double), other.astype(np.double))
 
 
+# What an average's own body may record: a human height and BMI (as a protocol's actors have).
+BODY_FIELDS = {"height_m": (1.2, 2.3, "m"), "bmi": (12.0, 70.0, "kg/m²")}
+
+
 def _mean_body(motions: list[Motion]) -> dict:
     """Mean ``height_m`` and ``bmi`` (and the shared ``sex``) of the motions that all record them.
 
-    The average's own body: COM retargeting measures the balance factor b against it.
+    The average's own body: COM retargeting measures the balance factor b against it. A value that is
+    no number or no human figure (a height of 160: centimetres) is an error naming the motion;
+    :func:`mean_body_notes` says what the average cannot record.
     """
     out = {}
-    for key in ("height_m", "bmi"):
+    for key, (low, high, unit) in BODY_FIELDS.items():
         values = [m.metadata.get(key) for m in motions]
+        for i, v in enumerate(values, 1):
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not low <= v <= high):
+                raise StimuliError(f"average: motion {i}: metadata {key} is {v!r}; expected a number within "
+                                   f"{low:g}–{high:g} {unit}")
         if all(v is not None for v in values):
             out[key] = float(np.mean(values))
     sexes = {m.metadata.get("sex") for m in motions}
     if len(sexes) == 1 and None not in sexes:
         out["sex"] = sexes.pop()
     return out
+
+
+def mean_body_notes(motions: list[Motion]) -> list[str]:
+    """Why an average records no body figure: the motions' sexes differ, or some lack a height or BMI."""
+    notes = []
+    sexes = [m.metadata.get("sex") for m in motions]
+    if len(set(sexes)) > 1:
+        notes.append(f"the motions' sexes differ ({', '.join(str(x) for x in sexes)}): the average records no sex; "
+                     "give --reference-sex to physics retarget")
+    for key in BODY_FIELDS:
+        lacking = [i for i, m in enumerate(motions, 1) if m.metadata.get(key) is None]
+        if lacking and len(lacking) < len(motions):
+            notes.append(f"motion(s) {', '.join(map(str, lacking))} record no {key}: the average records none")
+    return notes
 
 
 def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = None) -> Motion:
