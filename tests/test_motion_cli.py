@@ -64,6 +64,24 @@ def test_metrics_of_a_raw_capture_judge_contact_from_its_own_floor(tmp_path, cap
     assert 1.0 < q["stance_height_cm"] < 2.5 and "stand 1.6 cm above y = 0" in err
 
 
+def test_metrics_of_a_floating_clip_report_its_float_and_a_stub_is_refused(tmp_path, capsys):
+    """Raised 10 cm, a walk had no 'planted' frame within 5 cm of y = 0 and read Float 0; a 1-frame motion
+    got 100 % stance and its metadata's cycles and speed."""
+    from stimuli.motion.generate import GaitParams, generate
+
+    walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.6, fps=30, cycles=2)
+    raised = walk.root_translation.copy()
+    raised[:, 1] += 0.10
+    walk.replace(root_translation=raised).save(tmp_path / "up.npz")
+    capsys.readouterr()
+    assert main(["motion", "metrics", str(tmp_path / "up.npz")]) == 0
+    out, err = capsys.readouterr()
+    assert 9.5 < json.loads(out)["float_cm"] < 10.5 and "or the clip floats" in err
+    walk.slice(0, 1).save(tmp_path / "one.npz")
+    assert main(["motion", "metrics", str(tmp_path / "one.npz")]) == 2
+    assert "1 frame(s) hold no gait cycle" in " ".join(capsys.readouterr().err.split())
+
+
 def test_average_checks_and_explains_the_body_it_records(tmp_path, capsys):
     """A height of 160 (centimetres) made an average 'of 80.8 m'; a word made numpy raise; mixed sexes or a
     missing BMI left the average without a body, silently."""

@@ -15,6 +15,8 @@ from stimuli.fileio import check_output_dir, check_output_file
 STRIP_SUFFIXES = (".png", ".svg", ".pdf", ".jpg")
 # Feet standing higher than this above y = 0 mark a clip that was not grounded on its flat feet.
 RAW_STANCE_HEIGHT_CM = 0.5
+# The generator's shortest loop (one cycle): fewer frames hold no step to measure.
+MIN_METRIC_FRAMES = 8
 
 
 def register(subparsers) -> None:
@@ -289,6 +291,9 @@ def run_metrics(args: argparse.Namespace) -> int:
         raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its "
                            f"rig; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
                            "--out R.npz")
+    if m.n_frames < MIN_METRIC_FRAMES:
+        raise StimuliError(f"{args.motion}: {m.n_frames} frame(s) hold no gait cycle; the metrics need a motion of "
+                           f"at least one cycle (≥ {MIN_METRIC_FRAMES} frames)")
     q = motion_quality(m, body)
     # NaN (a figure with no value, e.g. no foot contact) is not JSON: write null.
     text = json.dumps(_finite_or_none(q), indent=2, sort_keys=True)
@@ -298,10 +303,11 @@ def run_metrics(args: argparse.Namespace) -> int:
         atomic_write_text(args.json, text + "\n")
     print(text)
     if q.get("stance_height_cm", 0.0) > RAW_STANCE_HEIGHT_CM:
-        print(f"note: the feet stand {q['stance_height_cm']:.1f} cm above y = 0 (a raw capture whose floor is its "
-              f"toes' push-off dip): contact is judged from that level, and stance, double support and flight "
-              f"are approximate on the skeleton's sole points; retarget onto a body and use --body for the "
-              f"mesh's figures", file=sys.stderr)
+        advice = ("retarget onto a body and use --body for the mesh's figures" if body is None else
+                  "the clip floats over the floor (Float)")
+        print(f"note: the feet stand {q['stance_height_cm']:.1f} cm above y = 0 (a raw capture's floor is its toes' "
+              f"push-off dip, or the clip floats): stance, double support and flight are judged from that level; "
+              f"{advice}", file=sys.stderr)
     return 0
 
 

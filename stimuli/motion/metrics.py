@@ -5,7 +5,7 @@ cycles, knee flexion range. Plausibility, after Tripathi et al. (HUMOS) and Yuan
 
 * **Penetrate** (cm): mean over frames of how far the lowest point lies below the ground.
 * **Float** (cm): mean, over frames in which a foot should touch (it is planted: slow relative to
-  the ground/belt and within 5 cm of it), of the height of that foot's lowest point.
+  the ground/belt and within 5 cm of the lowest it comes), of the height of that foot's lowest point.
 * **Skate** (%): share of adjacent frame pairs in which a foot in contact (points within 1 cm of
   the ground in both frames) slides: every touching point moves horizontally faster than 0.1 m/s
   relative to the belt (a foot rolling about a planted heel or ball does not skate).
@@ -193,7 +193,10 @@ def plausibility(sole: dict[str, np.ndarray], lowest_y: np.ndarray, com: np.ndar
         nxt = after[np.arange(len(pts)), k]
         vel = (nxt - low) / dt - belt
         speed = np.linalg.norm(vel[:, [0, 2]], axis=1)
-        planted = (speed < PLANTED_SPEED_MPS) & (low[:, 1] < SHOULD_TOUCH_HEIGHT_M)
+        # Near the ground: within 5 cm of the lowest this foot comes, not of y = 0 — a clip floating
+        # 10 cm over the floor had no planted frame at all and read Float 0.
+        near = low[:, 1] < max(0.0, float(low[:, 1].min())) + SHOULD_TOUCH_HEIGHT_M
+        planted = (speed < PLANTED_SPEED_MPS) & near
         float_vals.append(np.where(planted, np.maximum(low[:, 1], 0.0), np.nan))
     fv = np.concatenate(float_vals)
     floating = 100.0 * float(np.nanmean(fv)) if np.isfinite(fv).any() else 0.0
