@@ -173,6 +173,18 @@ def test_base_url_that_repeats_the_clips_folder_is_noted(tmp_path, run_cli):
     code, _, err = run_cli("survey", folder, "--format", "qsf", "--out", tmp_path / "s.qsf",
                            "--video-base-url", "https://x.org/clips/")
     assert code == 0 and "ends in clips/" in err and "https://x.org/clips/clips/" in (tmp_path / "s.qsf").read_text()
+    assert "addressed as https://x.org/clips/clips/" in " ".join(err.split())
+
+
+@pytest.mark.parametrize("url, message", [("https://x.org/exp1?a=1", "cannot carry a query"),
+                                          ("https://x.org/e#f", "or fragment"), ("http://", "with a host")])
+def test_base_url_that_cannot_take_clip_paths_is_refused(tmp_path, run_cli, url, message):
+    """The clip's path is appended to the base: a query or fragment (…?a=1/clips/x.mp4) or a host-less
+    http:// (http:/clips/…) made broken addresses without a word."""
+    folder = design_folder(tmp_path, "exp1_shape_motion")
+    for fmt, out in (("qsf", tmp_path / "s.qsf"), ("jspsych", tmp_path / "js")):
+        code, _, err = run_cli("survey", folder, "--format", fmt, "--out", out, "--video-base-url", url)
+        assert code == 2 and message in " ".join(err.split()) and not out.exists()
 
 
 def test_practice_longer_than_its_pool_is_noted_for_qualtrics(tmp_path, run_cli):

@@ -43,3 +43,28 @@ def human_body(height_m, bmi, height_option: str = "--height", bmi_option: str =
 
     in_range(height_option, height_m, HEIGHT_RANGE_M, "m (metres, not centimetres)")
     in_range(bmi_option, bmi, BMI_RANGE, "kg/m²")
+
+
+def base_url(option: str, url: str | None, absolute: bool):
+    """``url`` if clip paths can be appended to it: no spaces, no query or fragment (``…?a=1/clips/x.mp4``
+    is no clip address), and with ``absolute`` (Qualtrics loads the clips from elsewhere) an http(s)
+    address with a host; an http(s) address always needs its host (``http://`` gave ``http:/clips/…``).
+
+    >>> base_url("--video-base-url", "https://lab.example/exp1", absolute=True)
+    'https://lab.example/exp1'
+    """
+    from urllib.parse import urlsplit
+
+    if url is None:
+        return url
+    if not url.strip() or any(c.isspace() for c in url):
+        raise StimuliError(f"{option} {url!r}: expected an address without spaces, such as https://example.org/exp1")
+    parts = urlsplit(url)
+    if "?" in url or "#" in url:
+        raise StimuliError(f"{option} {url!r}: clip paths are appended to this address, so it cannot carry a "
+                           "query (?…) or fragment (#…)")
+    web = parts.scheme in ("http", "https")
+    if (absolute and not web) or (web and not parts.netloc):
+        raise StimuliError(f"{option} {url!r}: expected an absolute address with a host, starting with http:// or "
+                           "https:// (the Qualtrics exports load the clips from it)")
+    return url

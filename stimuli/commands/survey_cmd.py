@@ -6,9 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from stimuli.commands.checks import base_url
+
 FORMATS = ("qsf", "qualtrics-txt", "jspsych", "psychopy")
 FILE_FORMATS = ("qsf", "qualtrics-txt")  # the others write a folder
-URL_SCHEMES = ("http://", "https://")
 
 
 def register(subparsers) -> None:
@@ -64,9 +65,4 @@ def check_options(args: argparse.Namespace) -> None:
     if args.format == "psychopy":
         raise StimuliError("--video-base-url: the psychopy format plays the clips from the folder; it does not "
                            "use a URL")
-    if not url.strip() or any(c.isspace() for c in url):
-        raise StimuliError(f"--video-base-url {url!r}: expected an address without spaces, such as "
-                           "https://example.org/clips")
-    if args.format in FILE_FORMATS and not url.startswith(URL_SCHEMES):
-        raise StimuliError(f"--video-base-url {url!r}: a Qualtrics survey needs an absolute address starting "
-                           "with http:// or https://")
+    base_url("--video-base-url", url, absolute=args.format in FILE_FORMATS)

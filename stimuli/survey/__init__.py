@@ -51,8 +51,11 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
         result.notes += practice_repeat_notes(source)
     doubled = doubled_folder(video_base_url, [s.file for s in source.stimuli])
     if doubled:
+        from stimuli.survey.source import clip_url
+
+        example = clip_url(video_base_url, source.stimuli[0].file)
         result.notes.append(f"--video-base-url ends in {doubled}/ and every clip's file starts with {doubled}/, so "
-                            f"clips are addressed as …/{doubled}/{doubled}/…; if the clips themselves are at that URL, "
+                            f"clips are addressed as {example}; if the clips themselves are at that URL, "
                             f"give the address of the folder above {doubled}/")
     if fmt == "qsf":
         from stimuli.survey.qsf import qsf_text
