@@ -110,13 +110,39 @@ def read_csv(path: str):
     return data
 
 
+PRACTICE_TRUE = ("true", "t", "yes", "y", "1", "1.0")
+PRACTICE_FALSE = ("false", "f", "no", "n", "0", "0.0", "")
+
+
+def practice_flags(column, path: str):
+    """The ``practice`` column as booleans: true/false, yes/no, y/n, t/f, 1/0, 1.0/0.0 in any case; a blank
+    cell is a test trial. Any other value is refused, naming its CSV line: a typo must not turn a practice
+    trial into a test trial."""
+    import pandas as pd
+
+    text = column.astype(object).where(column.notna(), "").astype(str).str.strip().str.lower()
+    known = text.isin(PRACTICE_TRUE + PRACTICE_FALSE)
+    if not known.all():
+        bad = [(i, column[i]) for i in column.index[~known]]
+        shown = ", ".join(f"CSV line {i}: {v!r}" for i, v in bad[:5]) + (
+            f" … ({len(bad)} rows in all)" if len(bad) > 5 else "")
+        raise AnalysisError(f"{path}: column 'practice' must be true or false (true/false, yes/no, y/n, t/f, "
+                            f"1/0, or blank for a test trial), got {shown}")
+    return pd.Series(text.isin(PRACTICE_TRUE).to_numpy(), index=column.index)
+
+
 def check_no_practice_rows(data, path: str, used: list[str]) -> None:
     """Refuse practice trials in the data (e.g. ``analyze``'s ``responses_tidy.csv``): their levels (BODY =
     Prac) would enter the ANOVA as one more level of a factor. A ``practice`` column the user analyses as
     a factor or measure is theirs to use."""
     if "practice" not in data or "practice" in used:
         return
-    flags = data["practice"].astype(str).str.strip().str.lower().isin(["true", "1", "1.0", "yes"])
+    import pandas as pd
+
+    # the cells as written: pandas would read "nan", "NA" or "null" as a blank (test) cell
+    raw = pd.read_csv(path, usecols=["practice"], dtype=str, keep_default_na=False)["practice"]
+    raw.index = data.index
+    flags = practice_flags(raw, path)
     if not flags.any():
         return
     lines = [str(i) for i in data.index[flags]]

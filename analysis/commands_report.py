@@ -195,10 +195,15 @@ def run_analyze(args) -> int:
           f"{imp['participants']} participants")
     if imp["columns_not_imported"]:
         print(f"columns not imported: {', '.join(imp['columns_not_imported'])} (see exclusions.csv)")
+    if imp.get("files_not_read"):
+        print(f"files not read: {'; '.join(f['name'] + ' (' + f['reason'] + ')' for f in imp['files_not_read'])} "
+              f"(see exclusions.csv)")
     from analysis.position_bias import position_line
     for section in summary["sections"]:
         significant = section.get("results", {}).get("significant")
-        if significant is not None:
+        if section.get("results", {}).get("not_computed"):
+            print(f"{section['title']} — {section['results']['not_computed']}")
+        elif significant is not None:
             print(f"{section['title']}: significant {', '.join(significant) or 'none'}")
         if section.get("results", {}).get("check") == "position":
             print(position_line(section["results"]))

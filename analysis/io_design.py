@@ -59,6 +59,9 @@ class DesignInfo:
     alpha: float = 0.05
     position_labels: list[str] = field(default_factory=list)
     posthoc: str = "tukey"
+    # where the dependent measure came from: "dependent_measure", "protocol.analysis.dependent_measure" or
+    # "default" (neither set: the response type's first measure)
+    dependent_measure_source: str = "default"
     _rows: dict | None = field(default=None, repr=False)
 
     # -- factor look-ups ------------------------------------------------------------------------
@@ -157,7 +160,7 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
         raise AnalysisError(f"{where}: response.type must be likert, afc or ranking, got {rtype!r}")
     labels = [str(x) for x in response.get("labels") or []]
     analysis = _mapping(protocol, "analysis", where, "protocol.")
-    measure = _measure(meta, analysis, rtype, where)
+    measure, measure_source = _measure(meta, analysis, rtype, where)
     chosen = meta.get("chosen_factor") or next((f.name for f in factors if f.role == "alternatives"), None)
     if rtype in ("afc", "ranking") and chosen is None:
         raise AnalysisError(f"{where}: a {rtype} design needs chosen_factor or a factor with role 'alternatives'")
@@ -177,23 +180,25 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
                       conditions=conditions, trials=trials, manifest=manifest,
                       alpha=float((_mapping(meta, "analysis", where) or analysis).get("alpha", 0.05)),
                       position_labels=[str(x) for x in response.get("position_labels") or []],
-                      posthoc=str((_mapping(meta, "analysis", where) or analysis).get("posthoc", "tukey")))
+                      posthoc=str((_mapping(meta, "analysis", where) or analysis).get("posthoc", "tukey")),
+                      dependent_measure_source=measure_source)
 
 
-def _measure(meta: dict, analysis: dict, rtype: str, where: Path) -> str:
-    """The dependent measure (default: the response type's own), refused when the responses cannot give it."""
+def _measure(meta: dict, analysis: dict, rtype: str, where: Path) -> tuple[str, str]:
+    """The dependent measure (default: the response type's first) and the field it came from ("default" when
+    none is set); refused when the responses cannot give it."""
     if meta.get("dependent_measure"):
         field_name, measure = "dependent_measure", meta["dependent_measure"]
     elif analysis.get("dependent_measure"):
         field_name, measure = "protocol.analysis.dependent_measure", analysis["dependent_measure"]
     else:
-        return MEASURES_OF_TYPE[rtype][0]
+        return MEASURES_OF_TYPE[rtype][0], "default"
     allowed = MEASURES_OF_TYPE[rtype]
     if measure not in allowed:
         raise AnalysisError(f"{where}: field {field_name!r} is {measure!r}, but response.type {rtype!r} allows only "
                             f"{' or '.join(allowed)}; fix the protocol's analysis.dependent_measure and run "
                             f"`shapemotion design` again")
-    return measure
+    return measure, field_name
 
 
 def _factor(raw: dict, where: Path) -> FactorInfo:

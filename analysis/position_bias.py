@@ -121,12 +121,23 @@ def position_section(data: pd.DataFrame, design: DesignInfo, out: Path) -> dict 
     results = {"check": "position", "positions": tables[0].frame.to_dict("records"),
                "test": (tables[1].frame.iloc[0].to_dict() if len(names) > 2 else
                         tables[0].frame.iloc[0][["position", "mean share", "t", "df", "p"]].to_dict())}
+    infinite = [f"{row['position']} ({'∞' if row['t'] > 0 else '−∞'})" for row in results["positions"]
+                if isinstance(row["t"], float) and np.isinf(row["t"])]
+    if infinite:
+        # JSON has no ±∞: summary.json writes null, position_bias.json lists the cells under "non_finite"
+        results["t_infinite"] = {row["position"]: ("inf" if row["t"] > 0 else "-inf") for row in results["positions"]
+                                 if isinstance(row["t"], float) and np.isinf(row["t"])}
     note = ("Where the design counterbalances the screen positions, a position preference does not bias the "
             "results above, but it adds noise and may flag participants who answered by position. The "
             "participant is the unit: each participant's share of choices per position is tested against chance with a "
             "one-sample t-test (a binomial test of all choices pooled would treat one person's choices as "
             "independent)." + (" For k > 2 positions a Friedman test compares all positions at once."
                                if len(names) > 2 else ""))
+    if infinite:
+        note += (f" t is infinite for {', '.join(infinite)}: every participant chose that position with the "
+                 f"same share (no spread between participants), so the t statistic is ±∞ and p is 0. The JSON "
+                 f"files write ±∞ as null; position_bias.json lists these cells under \"non_finite\" and "
+                 f"summary.json under \"t_infinite\", with their sign.")
     return {"title": TITLE, "html": render_results(tables, "html"), "figures": [], "note": note,
             "results": results, "files": write_results(tables, out / "position_bias")}
 
@@ -140,7 +151,12 @@ def position_line(results: dict) -> str:
     elif "chi2" in test:
         stat = f"Friedman χ²({test['df']}) = {test['chi2']:.2f}, p = {test['p']:.3g}"
     else:
-        t = "∞" if test["t"] is None else f"{test['t']:.2f}"
+        # ±∞ (no spread between participants) is null once written as JSON: the sign is that of share − chance
+        t = test["t"]
+        if t is None or (isinstance(t, float) and np.isinf(t)):
+            t = "∞" if first["mean share"] > first["chance"] else "−∞"
+        else:
+            t = f"{t:.2f}"
         stat = f"t({test['df']}) = {t}, p = {test['p']:.3g}"
     return (f"{TITLE}: {first['position']} {100 * first['share of all choices']:.1f} % of all choices, "
             f"{100 * first['mean share']:.1f} % per participant on average (chance {100 * first['chance']:.1f} %); "

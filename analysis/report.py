@@ -112,7 +112,9 @@ def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bo
         sections.append(votes_section(design, imported.data, out))
     else:
         sections.append(ranking_section(design, imported.data, out))
-    if models:
+    sections[0]["note"] = f"{measure_note(design)} {sections[0]['note']}".strip()
+    # no variance in the cell values: the models' Wald tests would divide 0 by 0 (the GEE's robust SE is 0)
+    if models and not sections[0]["results"].get("not_computed"):
         section = _models_section(design, imported.data, out)
         if section:
             sections.append(section)
@@ -148,6 +150,9 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     from analysis import figures
     ai = anova_input(data, design)
     ai.data.to_csv(out / "cell_values.csv", index=False, lineterminator="\n")
+    values = pd.to_numeric(ai.data[ai.dv], errors="coerce")
+    if len(values) and values.notna().all() and values.nunique() == 1:
+        return _anova_not_computed(design, data, ai, float(values.iloc[0]))
     table = anova(ai.data, ai.dv, "participant", ai.within, ai.between, alpha=design.alpha)
     table = _testable(table, design)
     abbreviations = {f.name: f.abbreviations for f in design.factors if f.abbreviations}
@@ -186,6 +191,50 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     return {"title": f"{kind} ANOVA of {ai.dv} (the paper's analysis)", "html": render(table, "html") + corrected,
             "note": _anova_note(design), "figures": figs, "results": results,
             "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova_all.md", "anova_gg.md", "cell_values.csv"]}
+
+
+def _anova_not_computed(design: DesignInfo, data: pd.DataFrame, ai, value: float) -> dict:
+    """The ANOVA section when the cell values have no variance at all (e.g. every participant always chose
+    the left clip, so each METHOD level got 50 % in every cell): the report is still written — the
+    position-bias check and the other sections say what happened — and the section says why there is no
+    ANOVA."""
+    import html
+
+    reason = (f"every value of {ai.dv} in cell_values.csv is {value:g} (every participant, every cell), so there "
+              f"is no variance to analyse")
+    tests = data[~data["practice"].astype(bool)]
+    if design.response_type == "afc" and "position" in tests and tests["position"].notna().all() and len(tests):
+        per_person = tests.groupby("participant")["position"].nunique()
+        if (per_person == 1).all():
+            from analysis.position_bias import position_names
+            names = position_names(design)
+            chosen = tests.groupby("participant")["position"].first().astype(int).value_counts().sort_index()
+            where = ", ".join(f"{names[p - 1] if 0 < p <= len(names) else p} by {n} participant"
+                              f"{'s' if n != 1 else ''}" for p, n in chosen.items())
+            alt = design.alternatives.name
+            reason += (f": every participant chose the same screen position on every test trial ({where}). "
+                       f"The design shows each {alt} level at each position equally often, so these choices "
+                       f"carry no information about {alt} (see the position-bias check)")
+    reason = (f"{reason}. The additional models (mixed, ordinal, GEE) are left out for the same reason: their "
+              f"tests would divide a zero effect by a zero standard error.")
+    results = {"dv": ai.dv, "within": ai.within, "between": ai.between, "significant": None,
+               "not_computed": reason}
+    return {"title": f"ANOVA of {ai.dv} (the paper's analysis): not computed",
+            "html": f"<p><strong>The ANOVA of {ai.dv} cannot be computed:</strong> {html.escape(reason)}</p>\n",
+            "note": _anova_note(design), "figures": [], "results": results, "files": ["cell_values.csv"]}
+
+
+def measure_note(design: DesignInfo) -> str:
+    """Which dependent measure the report uses and where it came from (the default when design.json sets none)."""
+    from analysis.io_design import MEASURES_OF_TYPE
+    measure = design.dependent_measure
+    if design.dependent_measure_source != "default":
+        return f"Dependent measure: {measure}, as set by design.json field '{design.dependent_measure_source}'."
+    others = [m for m in MEASURES_OF_TYPE.get(design.response_type, ()) if m != measure]
+    also = (f" ({' or '.join(others)} would also fit this design: set the protocol's analysis.dependent_measure "
+            f"and run `shapemotion design` again to use it)") if others else ""
+    return (f"Dependent measure: {measure}, the default for response type {design.response_type}, as design.json sets "
+            f"no dependent_measure{also}.")
 
 
 def _testable(table, design: DesignInfo):
@@ -232,7 +281,9 @@ def _frame_html(frame: pd.DataFrame, caption: str, index: bool = True) -> str:
 def _design_summary(design: DesignInfo) -> dict:
     return {"name": design.protocol.get("name", ""), "participants_planned": design.participants,
             "seed": design.seed, "response": design.response_type, "labels": design.labels, "k": design.k,
-            "dependent_measure": design.dependent_measure, "alpha": design.alpha,
+            "dependent_measure": design.dependent_measure,
+            "dependent_measure_source": design.dependent_measure_source,
+            "dependent_measure_note": measure_note(design), "alpha": design.alpha,
             "factors": [{"name": f.name, "role": f.role, "levels": f.levels} for f in design.factors]}
 
 

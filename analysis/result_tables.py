@@ -3,7 +3,10 @@
 A result is a list of :class:`ResultTable` (name, caption, a frame with exact numbers). Text formats (md,
 tex, html) print p as the paper does (``<0.001`` …) and other numbers with two decimals; CSV (a ``table``
 column, then every table's columns) and JSON (``{"tables": [{name, caption, columns, rows}]}``) carry the
-exact numbers.
+exact numbers. JSON has no NaN or ±∞: such cells are ``null`` (as in ``summary.json``), and a table with a
+±∞ cell (a t-test without any spread, e.g. every participant chose one position every time) lists them under
+``non_finite`` as ``{"row": i, "column": c, "value": "inf" | "-inf"}`` (row counted from 0), so that the
+sign is not lost. Text tables print ``∞`` and ``−∞``; CSV writes ``inf`` and ``-inf``.
 
 >>> t = ResultTable("votes", "Votes per level", pd.DataFrame({"level": ["a", "b"], "votes": [7, 3], "p": [0.2, 0.2]}))
 >>> print(render_results([t], "md"))
@@ -72,11 +75,16 @@ def _markdown(table: ResultTable) -> str:
 
 def _latex(table: ResultTable) -> str:
     spec = "".join("r" if numeric else "l" for numeric in _numeric(table.frame))
-    rows = [" & ".join(tex_escape(cell) for cell in row) + r" \\" for row in _text_rows(table.frame)]
+    rows = [" & ".join(_tex_cell(cell) for cell in row) + r" \\" for row in _text_rows(table.frame)]
     return "\n".join([r"\begin{table}[htbp]", r"\centering", rf"\caption{{{tex_escape(table.caption)}}}",
                       rf"\begin{{tabular}}{{{spec}}}", r"\toprule",
                       " & ".join(tex_escape(c) for c in table.frame.columns) + r" \\", r"\midrule", *rows,
                       r"\bottomrule", r"\end{tabular}", r"\end{table}"]) + "\n"
+
+
+def _tex_cell(cell: str) -> str:
+    """A text cell for pdflatex, which has no glyph for ∞ (or the minus sign in −∞)."""
+    return tex_escape(cell).replace("−∞", r"$-\infty$").replace("∞", r"$\infty$")
 
 
 def _html(table: ResultTable) -> str:
@@ -111,11 +119,31 @@ def json_safe(value):
     return _plain(value)
 
 
+def non_finite_cells(frame: pd.DataFrame) -> list[dict]:
+    """The ±∞ cells of ``frame``, which JSON writes as null: ``[{"row": i, "column": c, "value": "-inf"}]``.
+
+    >>> non_finite_cells(pd.DataFrame({"t": [1.0, float("-inf"), float("nan")]}))
+    [{'row': 1, 'column': 't', 'value': '-inf'}]
+    """
+    cells = []
+    for i, row in enumerate(frame.itertuples(index=False)):
+        for column, value in zip(frame.columns, row):
+            value = value.item() if hasattr(value, "item") else value
+            if isinstance(value, float) and math.isinf(value):
+                cells.append({"row": i, "column": str(column), "value": "inf" if value > 0 else "-inf"})
+    return cells
+
+
 def _json(tables: list[ResultTable]) -> str:
-    out = [{"name": t.name, "caption": t.caption, "columns": [str(c) for c in t.frame.columns],
-            "rows": [{str(c): _plain(v) for c, v in zip(t.frame.columns, row)}
-                     for row in t.frame.itertuples(index=False)]}
-           for t in tables]
+    out = []
+    for t in tables:
+        entry = {"name": t.name, "caption": t.caption, "columns": [str(c) for c in t.frame.columns],
+                 "rows": [{str(c): _plain(v) for c, v in zip(t.frame.columns, row)}
+                          for row in t.frame.itertuples(index=False)]}
+        infinite = non_finite_cells(t.frame)
+        if infinite:
+            entry["non_finite"] = infinite
+        out.append(entry)
     return json.dumps({"tables": out}, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
 
 

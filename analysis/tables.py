@@ -48,7 +48,7 @@ def format_num(x: float, digits: int = 2) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return ""
     if math.isinf(x):
-        return "∞"
+        return "∞" if x > 0 else "−∞"
     if x != 0 and abs(x) < 0.5 * 10**-digits:
         return f"{x:.2g}"
     return f"{x:.{digits}f}"

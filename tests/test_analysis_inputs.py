@@ -473,3 +473,34 @@ def test_inspect_a_folder_of_jspsych_files(designs, run_cli, tmp_path, jspsych_f
     empty.mkdir()
     code, _, err = run_cli("responses", "inspect", empty)
     assert code == 2 and says(err, "the folder holds no .csv or .json response file")
+
+
+@pytest.mark.parametrize("value", ["y", "T", "YES", "t", "1.0", "1"])
+def test_anova_practice_column_accepts_the_usual_true_spellings(anova_csv, run_cli, value):
+    """Only true/1/1.0/yes used to count as practice: `y` or `T` made the practice row a silent test row."""
+    lines = anova_csv.read_text().splitlines()
+    rows = [line + ",n" for line in lines[1:]] + [f"{s},walk,Prac,3,{value}" for s in range(1, 5)]
+    anova_csv.write_text("\n".join([lines[0] + ",practice", *rows]) + "\n")
+    code, out, err = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY")
+    assert code == 2 and out == "" and says(err, "4 of 20 rows are practice trials", "CSV lines 18, 19, 20, 21")
+
+
+@pytest.mark.parametrize("value", ["2", "practice", "maybe", "nan", "-1"])
+def test_anova_practice_column_with_an_unknown_value_names_its_line(anova_csv, run_cli, tmp_path, value):
+    lines = anova_csv.read_text().splitlines()
+    rows = [line + (f",{value}" if i == 2 else ",False") for i, line in enumerate(lines[1:])]
+    anova_csv.write_text("\n".join([lines[0] + ",practice", *rows]) + "\n")
+    code, out, err = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY",
+                             "--out", tmp_path / "t.md")
+    assert code == 2 and out == "" and "Traceback" not in err and not (tmp_path / "t.md").exists()
+    assert says(err, "d.csv: column 'practice' must be true or false", f"CSV line 4: '{value}'")
+
+
+@pytest.mark.parametrize("values", [["F", "no", "N", "0", "0.0", "false", ""]])
+def test_anova_practice_column_false_spellings_and_blank_are_test_rows(anova_csv, run_cli, values):
+    lines = anova_csv.read_text().splitlines()
+    rows = [line + "," + values[i % len(values)] for i, line in enumerate(lines[1:])]
+    anova_csv.write_text("\n".join([lines[0] + ",practice", *rows]) + "\n")
+    code, out, _ = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY",
+                           "--all")
+    assert code == 0 and "| BODY |" in out

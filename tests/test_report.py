@@ -424,3 +424,77 @@ def test_participant_tests_match_scipy_and_statsmodels():
     single = votes_test(np.eye(3)[[0, 0, 1, 0, 2, 0]])
     assert single["test"] == "chi-squared goodness of fit" and single["p"] == pytest.approx(
         stats.chisquare([4, 1, 1]).pvalue)
+
+
+# -- degenerate choices: everyone always picks one screen position ---------------------------------------
+
+def _all_first_position(design, tmp_path, name="r.csv", participants=16, seed=5):
+    """Simulated long-format answers in which every test (and practice) answer is the first position."""
+    import io
+    sim = simulate_responses(design, load_model(None, design), participants, seed=seed)
+    frame = pd.read_csv(io.StringIO(export_text(sim, design, "long")), dtype=str, keep_default_na=False)
+    labels = design.position_labels or ["left", "right"]
+    frame["response"] = labels[0]
+    frame.to_csv(tmp_path / name, index=False)
+    return tmp_path / name
+
+
+def test_2afc_everyone_always_left_report_explains_instead_of_failing(reports, run_cli, tmp_path):
+    """percent_chosen is 50 in every cell: analyze used to stop (exit 2, "'percent' is constant") before the
+    position check could say why; right's t was shown as ∞ instead of −∞ and was a bare null in the JSON."""
+    folder, _ = reports["exp2_com_vs_average"]
+    answers = _all_first_position(load_design(folder / "design"), tmp_path)
+    code, out, err = run_cli("analyze", folder / "design", "--responses", answers, "--out", tmp_path / "report")
+    assert code == 0 and "Traceback" not in err, err
+    assert "not computed — every value of percent in cell_values.csv is 50" in out
+    assert "every participant chose the same screen position on every test trial (left by 16 participants)" in out
+    assert "carry no information about METHOD" in out and "t(15) = ∞, p = 0" in out
+    report = tmp_path / "report"
+    summary = json.loads((report / "summary.json").read_text())
+    anova_section = summary["sections"][0]
+    assert anova_section["title"].endswith("not computed") and anova_section["results"]["significant"] is None
+    assert [s["title"] for s in summary["sections"]][-1].startswith("Position-bias check")
+    assert not (report / "anova.md").exists() and not (report / "additional_models.csv").exists()
+    assert "cannot be computed" in (report / "report.html").read_text(encoding="utf-8")
+    md = (report / "position_bias.md").read_text()
+    assert "| left | 1024 | 1.00 | 0.50 | 16 | 1.00 | ∞ | 15 |" in md
+    assert "| right | 0 | 0.00 | 0.50 | 16 | 0.00 | −∞ | 15 |" in md
+    assert r"$-\infty$" in (report / "position_bias.tex").read_text()
+    shares = json.loads((report / "position_bias.json").read_text())["tables"][0]
+    assert [r["t"] for r in shares["rows"]] == [None, None]            # JSON has no ±∞: null, as summary.json
+    assert shares["non_finite"] == [{"row": 0, "column": "t", "value": "inf"},
+                                    {"row": 1, "column": "t", "value": "-inf"}]
+    assert summary["sections"][-1]["results"]["t_infinite"] == {"left": "inf", "right": "-inf"}
+
+
+def test_kafc_everyone_always_first_position_has_negative_infinite_t(reports, tmp_path):
+    from analysis.position_bias import position_tables
+    from analysis.result_tables import render_results
+    counts = pd.DataFrame([[10, 0, 0]] * 4, columns=list("ABC"), index=[str(i) for i in range(1, 5)])
+    tables = position_tables(counts, 0.05)
+    assert tables[0].frame["t"].tolist() == [float("inf"), float("-inf"), float("-inf")]
+    md = render_results(tables, "md")
+    assert "| A | 40 | 1.00 | 0.33 | 4 | 1.00 | ∞ |" in md and "| B | 0 | 0.00 | 0.33 | 4 | 0.00 | −∞ |" in md
+    assert json.loads(render_results(tables, "json"))["tables"][0]["non_finite"][1] == \
+        {"row": 1, "column": "t", "value": "-inf"}
+
+
+def test_report_says_which_dependent_measure_and_that_it_was_the_default(reports, tmp_path):
+    """An afc design.json without dependent_measure gets percent_chosen (votes is also valid): say so."""
+    folder, _ = reports["exp2_com_vs_average"]
+    design_dir = tmp_path / "design"
+    shutil.copytree(folder / "design", design_dir)
+    meta = json.loads((design_dir / "design.json").read_text())
+    meta.pop("dependent_measure", None)
+    meta.get("protocol", {}).get("analysis", {}).pop("dependent_measure", None)
+    (design_dir / "design.json").write_text(json.dumps(meta))
+    summary = analyze(design_dir, folder / "responses.csv", tmp_path / "report", models=False)
+    note = ("Dependent measure: percent_chosen, the default for response type afc, as design.json sets no "
+            "dependent_measure (votes would also fit this design")
+    assert summary["design"]["dependent_measure"] == "percent_chosen"
+    assert summary["design"]["dependent_measure_source"] == "default"
+    assert summary["design"]["dependent_measure_note"].startswith(note)
+    assert note.replace("'", "&#39;") in (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
+    explicit = analyze(folder / "design", folder / "responses.csv", tmp_path / "report2", models=False)
+    assert explicit["design"]["dependent_measure_source"] != "default"
+    assert "as set by design.json field" in explicit["design"]["dependent_measure_note"]

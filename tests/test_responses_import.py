@@ -212,3 +212,42 @@ def test_a_folder_of_per_participant_files(likert, tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(AnalysisError, match="no .csv or .json"):
         import_responses(tmp_path / "empty", likert)
+
+
+def test_a_folder_lists_what_it_does_not_read(likert, tmp_path):
+    """Subfolders, hidden and other files used to be dropped silently ("files: 1"); now each is listed, in
+    inspect and in the import's exclusions / summary, and the subfolder's files are counted."""
+    lines = (DATA / "jspsych_likert.csv").read_text().splitlines(keepends=True)
+    header, p01, p09 = lines[0], lines[1:12], lines[12:]
+    (tmp_path / "p01.csv").write_text(header + "".join(p01))
+    (tmp_path / "sub" / "more").mkdir(parents=True)
+    (tmp_path / "sub" / "more" / "p09.csv").write_text(header + "".join(p09))
+    (tmp_path / "README.txt").write_text("notes")
+    (tmp_path / ".DS_Store").write_text("x")
+    (tmp_path / ".p09_hidden.csv").write_text(header + "".join(p09))
+    expected = [{"name": ".DS_Store", "reason": "hidden file"},
+                {"name": ".p09_hidden.csv", "reason": "hidden file"},
+                {"name": "README.txt", "reason": "not a .csv or .json file"},
+                {"name": "sub/", "reason": "subfolder: subfolders are not searched; it holds 1 .csv/.json file"}]
+    info = inspect_file(tmp_path)
+    assert [f["file"] for f in info["files"]] == ["p01.csv"] and info["skipped"] == expected
+    from analysis.responses.inspect import describe_text
+    text = describe_text(info)
+    assert "skipped (not read): 4" in text and "  sub/: subfolder: subfolders are not searched" in text
+    result = import_responses(tmp_path, likert)
+    assert result.reconciles and result.n_rows == 11 and set(result.data["file"]) == {"p01.csv"}
+    assert result.summary()["files_not_read"] == expected and result.summary()["columns_not_imported"] == []
+    skipped = result.exclusions[result.exclusions["reason"] == "file not read"]
+    assert skipped["file"].tolist() == [e["name"] for e in expected] and skipped["row"].isna().all()
+
+
+def test_a_folder_whose_responses_are_only_in_a_subfolder_says_so(likert, tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "p01.csv").write_text((DATA / "jspsych_likert.csv").read_text())
+    (tmp_path / "notes.txt").write_text("x")
+    for call in (lambda: import_responses(tmp_path, likert), lambda: inspect_file(tmp_path)):
+        with pytest.raises(AnalysisError) as err:
+            call()
+        assert "no .csv or .json response file directly inside it" in str(err.value)
+        assert "a/ (subfolder: subfolders are not searched; it holds 1 .csv/.json file)" in str(err.value)
+        assert "notes.txt (not a .csv or .json file)" in str(err.value) and "pass the subfolder" in str(err.value)

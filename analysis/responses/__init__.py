@@ -23,11 +23,14 @@ from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import TagIndex
 from analysis.responses.qualtrics import qualtrics_answers
-from analysis.responses.read import RawFile, read_response_file, response_files
+from analysis.responses.read import RawFile, folder_entries, read_response_file, response_files
 from analysis.responses.tidy import assemble
 from analysis.responses.trialwise import trialwise_answers
 
 __all__ = ["ImportResult", "import_responses", "read_response_file"]
+
+# exclusions.csv reason of a folder entry that is not read (hidden file, other file, subfolder); row is empty
+FILE_NOT_READ = "file not read"
 
 
 @dataclass
@@ -60,7 +63,13 @@ class ImportResult:
                 "participants": int(self.data["participant"].nunique()),
                 "answers": int((~self.data["practice"]).sum()),
                 "excluded_by_reason": {str(k): int(v) for k, v in rows["reason"].value_counts().sort_index().items()},
-                "columns_not_imported": self.exclusions.loc[self.exclusions["row"].isna(), "column"].tolist()}
+                "columns_not_imported": self.exclusions.loc[self.exclusions["row"].isna()
+                                                            & (self.exclusions["reason"] != FILE_NOT_READ),
+                                                            "column"].tolist(),
+                "files_not_read": [{"name": f, "reason": d} for f, d in
+                                   self.exclusions.loc[self.exclusions["reason"] == FILE_NOT_READ,
+                                                       ["file", "detail"]].itertuples(index=False)]
+                if "file" in self.exclusions else []}
 
 
 def _row_keys(frame: pd.DataFrame) -> set:
@@ -139,7 +148,11 @@ def import_folder(folder: Path, design: DesignInfo) -> ImportResult:
                           "reason": "duplicate participant id",
                           "detail": [f"{p!r} already imported from {owner[p]}" for p in moved["participant"]],
                           "column": "", "file": moved["file"]})
-    exclusions = pd.concat([exclusions, extra], ignore_index=True).astype({"row": "Int64"})
+    # what the folder holds besides the response files: listed, as nothing is dropped silently
+    skipped = pd.DataFrame([{"row": None, "participant": "", "reason": FILE_NOT_READ, "detail": s["reason"],
+                             "column": "", "file": s["name"]} for s in folder_entries(folder)[1]],
+                           columns=["row", "participant", "reason", "detail", "column", "file"])
+    exclusions = pd.concat([exclusions, extra, skipped], ignore_index=True).astype({"row": "Int64"})
     formats = "+".join(sorted({r.format for r in results}))
     return ImportResult(folder, formats, data[~later].reset_index(drop=True), exclusions,
                         sum(r.n_rows for r in results))

@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from analysis.responses.qualtrics import UNFINISHED, classify_columns
-from analysis.responses.read import _participant_column, read_response_file, response_files
+from analysis.responses.read import _participant_column, folder_entries, read_response_file, response_files
 
 
 def inspect_file(path: str | Path) -> dict:
@@ -31,11 +31,13 @@ def inspect_folder(folder: Path) -> dict:
     Participants are counted once across files, as the import keeps a participant found in several files once.
     """
     parts = [_inspect_one(f) for f in response_files(folder)]
+    skipped = folder_entries(folder)[1]
     infos = [info for info, _ in parts]
     info = {"file": str(folder), "format": "+".join(sorted({i["format"] for i in infos})),
             "rows": sum(i["rows"] for i in infos), "responses": sum(i["responses"] for i in infos),
             "participants": len(set().union(*(ids for _, ids in parts))),
-            "files": [{k: v for k, v in i.items() if k != "columns"} | {"file": Path(i["file"]).name} for i in infos]}
+            "files": [{k: v for k, v in i.items() if k != "columns"} | {"file": Path(i["file"]).name} for i in infos],
+            "skipped": skipped}
     if any("unfinished" in i for i in infos):
         info["unfinished"] = sum(i.get("unfinished", 0) for i in infos)
     columns: dict[str, dict] = {}
@@ -82,6 +84,9 @@ def describe_text(info: dict) -> str:
         lines.append(f"files: {len(info['files'])}")
         lines += [f"  {f['file']}: {f['format']}; rows {f['rows']}, responses {f['responses']}, "
                   f"participants {f['participants']}" for f in info["files"]]
+        if info.get("skipped"):
+            lines.append(f"skipped (not read): {len(info['skipped'])}")
+            lines += [f"  {s['name']}: {s['reason']}" for s in info["skipped"]]
         lines.append("total:")
     lines += [f"format: {info['format']}", f"rows: {info['rows']}", f"responses: {info['responses']}",
               f"participants: {info['participants']}"]

@@ -55,11 +55,46 @@ class RawFile:
         return len(self.rows)
 
 
+RESPONSE_SUFFIXES = (".csv", ".json")
+
+
+def folder_entries(folder: Path) -> tuple[list[Path], list[dict]]:
+    """The response files directly in ``folder`` (``*.csv``, ``*.json``, any case; by name) and everything else
+    there, which is not read: ``[{"name": …, "reason": …}]`` — hidden files (``.DS_Store``), other files
+    (``README.txt``) and subfolders, which are not searched (an ``analyze`` report folder inside would
+    otherwise be read as responses). Callers list the skipped entries, so that nothing is dropped silently."""
+    files, skipped = [], []
+    for path in sorted(folder.iterdir(), key=lambda p: p.name):
+        if path.name.startswith("."):
+            skipped.append({"name": path.name + ("/" if path.is_dir() else ""), "reason": "hidden file"})
+        elif path.is_dir():
+            inside = sum(1 for q in path.rglob("*") if q.is_file() and q.suffix.lower() in RESPONSE_SUFFIXES)
+            held = f"; it holds {inside} .csv/.json file{'s' if inside != 1 else ''}" if inside else ""
+            skipped.append({"name": path.name + "/", "reason": f"subfolder: subfolders are not searched{held}"})
+        elif path.is_file() and path.suffix.lower() in RESPONSE_SUFFIXES:
+            files.append(path)
+        else:
+            skipped.append({"name": path.name, "reason": "not a .csv or .json file"
+                            if path.is_file() else "not a regular file"})
+    return files, skipped
+
+
+def skipped_text(skipped: list[dict]) -> str:
+    """``README.txt (not a .csv or .json file); sub/ (subfolder: …)``."""
+    return "; ".join(f"{s['name']} ({s['reason']})" for s in skipped)
+
+
 def response_files(folder: Path) -> list[Path]:
-    """The response files of a folder (``*.csv``, ``*.json``; e.g. one jsPsych file per participant), by name."""
-    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in (".csv", ".json"))
+    """The response files of a folder (``*.csv``, ``*.json``; e.g. one jsPsych file per participant), by name.
+
+    See :func:`folder_entries` for what is not read."""
+    files, skipped = folder_entries(folder)
     if not files:
-        raise AnalysisError(f"{folder}: the folder holds no .csv or .json response file")
+        also = f" (not read: {skipped_text(skipped)})" if skipped else ""
+        hint = ("; move the files into the folder itself, or pass the subfolder that holds them"
+                if any(s["name"].endswith("/") and "holds" in s["reason"] for s in skipped) else "")
+        raise AnalysisError(f"{folder}: the folder holds no .csv or .json response file directly inside "
+                            f"it{also}{hint}")
     return files
 
 
