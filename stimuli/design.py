@@ -138,8 +138,9 @@ def test_stimuli(protocol: Protocol) -> list[Stimulus]:
 
 
 def practice_stimuli(protocol: Protocol) -> list[Stimulus]:
-    """Practice conditions: the test crossing with the practice-only levels substituted."""
-    if not protocol.practice.levels:
+    """Practice conditions: the test crossing with the practice-only levels substituted; none when
+    ``practice.per_block`` is 0 (no trial would show them: :func:`practice_notes` says so)."""
+    if not protocol.practice.levels or not protocol.practice.per_block:
         return []
     lists = [protocol.practice.levels.get(f.name, f.levels) for f in protocol.factors if f.role != "alternatives"]
     return _stimuli_for(protocol, lists, "practice")
@@ -155,6 +156,15 @@ def practice_pool(protocol: Protocol) -> int:
     between = protocol.factors_with_role("between")
     scope = {f.name: f.levels[0] for f in between} | block_cells(protocol)[0]
     return sum(_matches(s, scope) for s in practice_stimuli(protocol))
+
+
+def practice_notes(protocol: Protocol) -> list[str]:
+    """A note when practice levels are given but ``per_block`` is 0: they are checked, not used."""
+    if protocol.practice.levels and not protocol.practice.per_block:
+        given = "; ".join(f"{name}: {', '.join(levels)}" for name, levels in protocol.practice.levels.items())
+        return [f"practice.levels ({given}) unused: practice.per_block is 0, so no practice trials and no practice "
+                "stimuli are made; set per_block > 0 to use them, or remove practice.levels"]
+    return []
 
 
 def familiarization_stimuli(protocol: Protocol) -> list[Stimulus]:
@@ -277,7 +287,7 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     trials.sort(key=lambda t: (t.participant, t.trial))
     block_orders = dict(sorted(block_orders.items()))
     order_labels = [[block_label(blocks[i]) for i in order] for order in orders or []]
-    notes = order_balance_notes(group_cells, group_of, block_orders, order_labels)
+    notes = order_balance_notes(group_cells, group_of, block_orders, order_labels) + practice_notes(protocol)
     return Design(protocol, n, seed, tests + practices + familiar, trials,
                   [block_label(b) for b in blocks], block_orders, notes)
 

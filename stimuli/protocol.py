@@ -35,11 +35,16 @@ HEIGHT_RANGE_M = (1.2, 2.3)
 BMI_RANGE = (13.0, 60.0)
 GIRTH_RANGES_M = {"waist_m": (0.4, 2.0), "hip_m": (0.5, 2.0), "chest_m": (0.5, 2.0)}
 BODY_FAT_RANGE_PCT = (0.0, 70.0)
+# A clip's frame rate and size (pixels): the protocol's clip settings and render's --fps/--resolution.
+CLIP_FPS_RANGE = (5, 240)
+CLIP_WIDTH_RANGE = (64, 7680)
+CLIP_HEIGHT_RANGE = (64, 4320)
 # The level settings the renderer reads, by the maps_to of the factors they belong to (None: any factor).
 LEVEL_SETTINGS = {"view_deg": None, "modifies": ("parameter",), "motion": ("source", "method"),
                   "base_scale": ("source",)}
 SOURCE_MOTIONS = ("lean_walk", "modifier", "generator")  # or "bvh:<path>"
-# METHOD levels (NoCOM/COM) name their motions themselves; the setting only documents them (Exp 2).
+# What a METHOD level shows: its ``level_settings.<level>.motion`` when given, else by its name
+# (NoCOM = the average motion, any other name = the physics (COM) motion): see method_motion_of.
 METHOD_MOTIONS = ("average", "physics")
 HEX_COLOUR = re.compile(r"^#?[0-9A-Fa-f]{6}$")
 # What an alternatives factor's levels may map to: the renderer makes a motion for each of these
@@ -68,7 +73,7 @@ class Actor(Strict):
     hip_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["hip_m"][0], le=GIRTH_RANGES_M["hip_m"][1])
     chest_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["chest_m"][0], le=GIRTH_RANGES_M["chest_m"][1])
     body_fat_pct: float | None = Field(default=None, ge=BODY_FAT_RANGE_PCT[0], le=BODY_FAT_RANGE_PCT[1])
-    practice_only: bool = False
+    practice_only: bool = Field(default=False, strict=True)
 
     @field_validator("id", "label")
     @classmethod
@@ -192,13 +197,14 @@ class ClipSettings(Strict):
     are even because H.264 in yuv420p halves them for the colour planes."""
 
     duration_s: float = Field(gt=0, le=120)
-    cycles: int = Field(default=1, ge=1)
-    fps: int = Field(default=30, ge=5, le=240)
-    width: int = Field(default=1280, ge=64, le=7680)
-    height: int = Field(default=720, ge=64, le=4320)
+    # strict: YAML's true, "2" or 0 are not a number of cycles, a frame rate or a yes/no
+    cycles: int = Field(default=1, ge=1, strict=True)
+    fps: int = Field(default=30, ge=CLIP_FPS_RANGE[0], le=CLIP_FPS_RANGE[1], strict=True)
+    width: int = Field(default=1280, ge=CLIP_WIDTH_RANGE[0], le=CLIP_WIDTH_RANGE[1], strict=True)
+    height: int = Field(default=720, ge=CLIP_HEIGHT_RANGE[0], le=CLIP_HEIGHT_RANGE[1], strict=True)
     camera: Camera = Camera()
     background: str = "#ffffff"
-    loop: bool = True
+    loop: bool = Field(default=True, strict=True)
 
     @field_validator("width", "height")
     @classmethod
@@ -252,7 +258,7 @@ class Blocks(Strict):
 class Practice(Strict):
     """Practice trials before each block, built from practice-only levels (not used in the test)."""
 
-    per_block: int = Field(default=0, ge=0)
+    per_block: int = Field(default=0, ge=0, strict=True)
     levels: dict[str, list[str]] = {}
 
     @field_validator("levels", mode="before")
@@ -264,7 +270,7 @@ class Practice(Strict):
 class Familiarization(Strict):
     """Before each block, the block's bodies shown one by one (e.g. in increasing BMI order)."""
 
-    enabled: bool = False
+    enabled: bool = Field(default=False, strict=True)
     order: Literal["bmi_ascending", "bmi_descending", "declared"] = "bmi_ascending"
 
 
@@ -296,8 +302,8 @@ class Protocol(Strict):
 
     name: str
     title: str = ""
-    seed: int = Field(ge=0)
-    participants: int = Field(ge=1, le=100_000)
+    seed: int = Field(ge=0, strict=True)
+    participants: int = Field(ge=1, le=100_000, strict=True)
     actors: list[Actor] = []
     factors: list[Factor] = Field(min_length=1)
     gaits: dict[str, GaitSpec] = {}
@@ -305,7 +311,7 @@ class Protocol(Strict):
     alternatives: Alternatives = Alternatives()
     clip: ClipSettings
     blocks: Blocks = Blocks()
-    repetitions: int = Field(default=1, ge=1, le=20)
+    repetitions: int = Field(default=1, ge=1, le=20, strict=True)
     practice: Practice = Practice()
     familiarization: Familiarization = Familiarization()
     response: Response
@@ -378,8 +384,10 @@ def check_consistency(p: Protocol) -> None:
     _check_alternatives_motion(p)
     _check_measure(p)
     _check_clip_timing(p)
-    _check_screen_mapping(p)
     _check_practice(p, names)
+    _check_screen_mapping(p)
+    if p.practice.per_block:
+        _check_practice_pool(p)
     between_cells = 1
     for f in p.factors_with_role("between"):
         between_cells *= len(f.levels)
@@ -390,16 +398,35 @@ def check_consistency(p: Protocol) -> None:
 
 
 def _check_practice(p: Protocol, names: list[str]) -> None:
+    """practice.levels, whatever per_block is: practice-only levels of within factors that do not
+    define blocks (a practice trial keeps its block's and between group's levels, so practice levels
+    of those factors would make clips no block shows), each list non-empty and without repeats."""
     for name, levels in p.practice.levels.items():
+        where = f"practice.levels.{name}"
         if name not in names:
             raise ValueError(f"practice.levels: unknown factor {name!r} (factors: {names})")
-        clash = sorted(set(levels) & set(p.factor(name).levels))
+        factor = p.factor(name)
+        if factor.role != "within" or name in p.blocks.by:
+            what = ("defines the blocks (blocks.by)" if factor.role == "within"
+                    else f"is an {factor.role} factor" if factor.role == "alternatives"
+                    else f"is a {factor.role} factor")
+            raise ValueError(f"{where}: {name} {what}; practice levels are for within factors that do not define "
+                             "blocks (practice trials keep the levels of their block, their between group and "
+                             f"every alternative shown side by side); leave {name} out of practice.levels")
+        if not levels:
+            raise ValueError(f"{where}: the list is empty; give one or more practice-only levels of {name}, or "
+                             f"leave {name} out of practice.levels")
+        repeated = sorted({level for level in levels if levels.count(level) > 1})
+        if repeated:
+            raise ValueError(f"{where}: levels repeat: {repeated} (each practice level is one set of clips)")
+        unsafe = [level for level in levels if not SAFE_ID.match(level)]
+        if unsafe:
+            raise ValueError(f"{where}: level {unsafe[0]!r} must use letters, digits, '_', '-', '.' or '+'")
+        clash = sorted(set(levels) & set(factor.levels))
         if clash:
-            raise ValueError(f"practice.levels.{name}: {clash} are test levels; practice must use other levels")
+            raise ValueError(f"{where}: {clash} are test levels; practice must use other levels")
     if p.practice.per_block and not p.practice.levels:
         raise ValueError("practice.per_block > 0 needs practice.levels (the practice-only levels to show)")
-    if p.practice.per_block:
-        _check_practice_pool(p)
 
 
 def _check_practice_pool(p: Protocol) -> None:
@@ -409,11 +436,9 @@ def _check_practice_pool(p: Protocol) -> None:
 
     wanted, pool = p.practice.per_block, practice_pool(p)
     shown = ", ".join(f"{name}: {', '.join(levels)}" for name, levels in p.practice.levels.items())
-    if not pool:
-        scope = sorted(set(p.practice.levels) & (set(p.blocks.by) | {f.name for f in p.factors_with_role("between")}))
+    if not pool:  # _check_practice makes this unreachable; kept so that a future rule cannot crash here
         raise ValueError(f"practice.per_block: {wanted} practice trial(s) per block asked for, but no practice clip "
-                         f"belongs to any block: practice.levels gives practice-only levels for {', '.join(scope)}, "
-                         "which define(s) the blocks or the between groups; give practice levels for other factors")
+                         f"belongs to any block ({shown})")
     if pool == 1 and wanted > 1:
         raise ValueError(f"practice.per_block: {wanted} practice trials per block asked for, but each block has only "
                          f"1 distinct practice clip ({shown}), which would play {wanted} times back to back; use "
@@ -430,6 +455,55 @@ def _check_alternatives_motion(p: Protocol) -> None:
             raise ValueError(f"factors.{index}.maps_to: {f.name} is an alternatives factor, whose levels are motions "
                              f"shown side by side; the renderer makes those for maps_to "
                              f"{', '.join(ALTERNATIVE_MOTIONS)} only, got {f.maps_to!r}{hint}")
+        if f.role == "alternatives":
+            _check_distinct_motions(f, index)
+
+
+def method_motion_of(factor: Factor, level: str) -> str:
+    """What a METHOD level shows (``average`` or ``physics``): its ``level_settings.<level>.motion``,
+    or, with no setting, by its name: NoCOM = the average motion, any other name = physics (COM).
+
+    >>> from stimuli.protocol import Factor
+    >>> f = Factor(name="METHOD", role="alternatives", levels=["Avg", "COM"], maps_to="method",
+    ...            level_settings={"Avg": {"motion": "average"}})
+    >>> method_motion_of(f, "Avg"), method_motion_of(f, "COM")
+    ('average', 'physics')
+    """
+    setting = factor.level_settings.get(level, {}).get("motion")
+    if setting is not None:
+        return str(setting)
+    return "average" if level == "NoCOM" else "physics"
+
+
+def _motion_source(factor: Factor, level: str) -> str | None:
+    """The motion an alternatives level resolves to (None: not known before the render)."""
+    if factor.maps_to == "method":
+        return method_motion_of(factor, level)
+    if factor.maps_to == "strength":
+        return f"body fat {float(level):g} %"
+    spec = factor.level_settings.get(level, {}).get("motion")   # "source": its setting, if any
+    if isinstance(spec, str) and spec.startswith("bvh:"):
+        return "bvh:" + str(Path(spec[4:].strip()).expanduser())
+    return spec
+
+
+def _check_distinct_motions(f: Factor, index: int) -> None:
+    """Alternatives shown side by side must differ: two levels with the same motion would show the
+    same clip twice and make the choice meaningless."""
+    seen: dict[str, str] = {}
+    for level in f.levels:
+        source = _motion_source(f, level)
+        if source is None:
+            continue
+        if source in seen:
+            how = ("(level_settings.<level>.motion, or by name: NoCOM = average, any other name = physics)"
+                   if f.maps_to == "method" else "")
+            field = (f"factors.{index}.level_settings.{level}.motion" if "motion" in f.level_settings.get(level, {})
+                     else f"factors.{index}.levels")
+            raise ValueError(f"{field}: {f.name} levels {seen[source]!r} and {level!r} both "
+                             f"show the {source} motion{' ' + how if how else ''}; the alternatives shown side by "
+                             "side must differ")
+        seen[source] = level
 
 
 def _check_measure(p: Protocol) -> None:
@@ -452,9 +526,11 @@ def _check_clip_timing(p: Protocol) -> None:
     cycle_s = 120.0 / slowest.cadence_spm
     if not p.clip.loop:   # the exact cadence, cut at the end: only the cycles shown can fall short
         if slowest.shown_cycles * (1 + TOLERANCE) < p.clip.cycles:
-            raise ValueError(f"clip.cycles: the {p.clip.duration_s:g} s clip shows {slowest.shown_cycles:.2f} cycles of "
+            lower = " or lower clip.cycles" if p.clip.cycles > 1 else ""   # 1 is the fewest
+            field = "clip.cycles" if p.clip.cycles > 1 else "clip.duration_s"
+            raise ValueError(f"{field}: the {p.clip.duration_s:g} s clip shows {slowest.shown_cycles:.2f} cycles of "
                              f"{slowest.gait} ({slowest.cadence_spm:g} steps/min), fewer than {p.clip.cycles}; use "
-                             f"duration_s >= {seconds_text(p.clip.cycles * cycle_s, p.clip.fps)} s or lower clip.cycles")
+                             f"duration_s >= {seconds_text(p.clip.cycles * cycle_s, p.clip.fps)} s{lower}")
         return
     if slowest.clip_s * (1 + TOLERANCE) < cycle_s:
         shortest = math.ceil(cycle_s / (1 + TOLERANCE) * p.clip.fps) / p.clip.fps
@@ -496,7 +572,7 @@ def _check_screen_mapping(p: Protocol) -> None:
                         raise ValueError(f"factors.{f.name}: level {level!r} names no actor ({who}label {level!r}); "
                                          f"declare it under actors")
         if f.maps_to == "sex":
-            bad = sorted(set(f.levels) - {"F", "M"})
+            bad = sorted(set(f.levels + practice) - {"F", "M"})
             if bad:
                 raise ValueError(f"factors.{f.name}: sex levels must be F or M, got {bad}")
         if f.maps_to == "parameter" and p.factor_mapped_to("strength") is not None:
@@ -506,7 +582,7 @@ def _check_screen_mapping(p: Protocol) -> None:
                 raise ValueError(f"factors.{f.name}: levels {bare} need level_settings.<level>.modifies: Table "
                                  "4-1 rows joined by '+' (e.g. \"arm_abduction+arm_bob\")")
         if f.maps_to == "gait":
-            missing = sorted(set(f.levels) - set(p.gaits))
+            missing = sorted(set(f.levels + practice) - set(p.gaits))
             if missing:
                 raise ValueError(f"factors.{f.name}: gait levels {missing} are not declared under gaits")
 
@@ -607,6 +683,9 @@ def describe_validation_error(exc: ValidationError, source: str, root) -> str:
             message = "required field is missing"
         elif "input" in err and err["type"] not in ("value_error",):
             message += f" (got {err['input']!r})"
+            if err["type"] in ("int_type", "bool_type"):  # strict fields: no true for 1, no "2", no 0 for false
+                message += ("; write a whole number without quotes" if err["type"] == "int_type"
+                            else "; write true or false without quotes")
         parts.append(f"{field}{where}: {message}")
     return f"{source}: invalid protocol: " + "; ".join(parts)
 

@@ -193,3 +193,18 @@ def test_practice_beyond_the_pool_repeats_numbered_never_back_to_back():
         assert len(set(ids)) == 4 and all(a != b for a, b in zip(ids, ids[1:]))
         for sid in set(ids):
             assert [t.repetition for t in practice if t.stimulus_id == sid] == list(range(1, ids.count(sid) + 1))
+
+
+def test_practice_levels_with_per_block_0_make_no_stimuli_and_say_so(tmp_path, run_cli):
+    """Bad-input audit: with per_block 0 the practice levels are checked but no trial shows them, so no
+    practice stimulus is made (conditions.csv had 16 nobody sees) and a note names the unused levels."""
+    text = open("protocols/exp1_shape_motion.yaml").read().replace("per_block: 4 ", "per_block: 0 ", 1)
+    path = tmp_path / "pb0.yaml"
+    path.write_text(text)
+    code, stdout, stderr = run_cli("design", path, "--out", tmp_path / "out")
+    assert code == 0, stderr
+    conditions = pd.read_csv(tmp_path / "out" / "conditions.csv")
+    assert not conditions.practice.any() and not conditions.stimulus_id.str.startswith("practice-").any()
+    assert "note: practice.levels (BODY: P1, P2; MOTION: P1, P2) unused: practice.per_block is 0" in stdout
+    code, stdout, _ = run_cli("validate", path)
+    assert code == 0 and "0 practice" in stdout and "practice.levels (BODY: P1, P2; MOTION: P1, P2) unused" in stdout

@@ -27,8 +27,9 @@ def protocols(draw):
     measure = "mean_rating"
     if has_alternatives:
         k = draw(st.integers(2, 4))
-        factors.append({"name": "ALT", "role": "alternatives", "levels": [f"a{j}" for j in range(k)],
-                        "maps_to": "method"})  # a mapping the renderer makes motions for
+        # a mapping the renderer makes a distinct motion for at every level: body-fat strengths
+        factors.append({"name": "ALT", "role": "alternatives", "levels": ["12", "23.5", "35", "46.5"][:k],
+                        "maps_to": "strength"})
         display["layout"] = "side_by_side" if k == 2 else "row"
         alternatives = {"arrangements": draw(st.sampled_from(["all", "latin_square", "fixed"])),
                         "counterbalance": draw(st.sampled_from(["within", "between"]))}

@@ -76,7 +76,49 @@ CASES = {
          "BODY: P1, MOTION: P1"]),
     "practice levels for the block factor": (
         replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {GAIT: [run]}"),
-        ["practice.per_block", "no practice clip belongs to any block", "GAIT"]),
+        ["practice.levels.GAIT", "line 71", "GAIT defines the blocks", "within factors that do not define blocks"]),
+    # Bad-input audit: practice levels are checked whatever per_block is, and never crash.
+    "practice levels for the between factor": (
+        replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {SEX: [X], BODY: [P1, P2]}"),
+        ["practice.levels.SEX", "line 71", "SEX is a between factor", "within factors that do not define blocks"]),
+    "practice levels for the between factor, per_block 0": (
+        replace(replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {SEX: [X]}"),
+                "per_block: 4 ", "per_block: 0 "),
+        ["practice.levels.SEX", "SEX is a between factor"]),
+    "practice levels for the block factor, per_block 0": (
+        replace(replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {GAIT: [run]}"),
+                "per_block: 4 ", "per_block: 0 "),
+        ["practice.levels.GAIT", "GAIT defines the blocks"]),
+    "practice level naming no actor, per_block 0": (
+        replace(replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: [P9]}"),
+                "per_block: 4 ", "per_block: 0 "),
+        ["factors.BODY", "'P9'", "names no actor"]),
+    "practice levels for the alternatives factor": (
+        replace(EXP2, "levels: {BODY: [P1, P2]}", "levels: {BODY: [P1, P2], METHOD: [X]}"),
+        ["practice.levels.METHOD", "METHOD is an alternatives factor"]),
+    "repeated practice levels": (
+        replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: [P1, P1], MOTION: [P1, P2]}"),
+        ["practice.levels.BODY", "line 71", "levels repeat: ['P1']"]),
+    "empty practice level list": (
+        replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: []}"),
+        ["practice.levels.BODY", "line 71", "the list is empty"]),
+    "two METHOD levels set to the same motion": (
+        replace(EXP2, "COM: {motion: physics}", "COM: {motion: average}"),
+        ["factors.3.level_settings.COM.motion", "line 48", "'NoCOM' and 'COM' both show the average motion"]),
+    "two METHOD levels without settings, named alike by the fallback": (
+        edited(EXP2, lambda d: d["factors"][3].update(levels=["A", "B"], abbreviations={}, level_settings={})),
+        ["factors.3.levels", "'A' and 'B' both show the physics motion", "NoCOM = average"]),
+    "two SOURCE levels with the same motion": (
+        replace((Path(__file__).resolve().parents[1] / "protocols" / "thesis_validation.yaml").read_text(),
+                "keyframed: {motion: generator}", "keyframed: {motion: lean_walk}"),
+        ["level_settings.keyframed.motion", "'lean_mocap' and 'keyframed' both show the lean_walk motion"]),
+    "clip.cycles given as true": (replace(EXP1, "cycles: 2", "cycles: true"),
+                                  ["clip.cycles", "line 57", "valid integer", "(got True)", "without quotes"]),
+    "clip.cycles given as text": (replace(EXP1, "cycles: 2", 'cycles: "2"'), ["clip.cycles", "line 57", "(got '2')"]),
+    "clip.loop given as a number": (replace(EXP1, "cycles: 2", "cycles: 2\n  loop: 0"),
+                                    ["clip.loop", "line 58", "valid boolean", "(got 0)", "true or false"]),
+    "clip.loop given as text": (replace(EXP1, "cycles: 2", 'cycles: 2\n  loop: "false"'),
+                                ["clip.loop", "valid boolean", "(got 'false')"]),
     "unknown clip field": (replace(EXP1, "cycles: 2", "cyclez: 2"),
                            ["clip.cyclez", "line 57", "unknown field", "duration_s, cycles, fps, width, height"]),
 }
@@ -127,3 +169,15 @@ def test_exp1_protocol_matches_table2():
     assert [(f.name, f.role) for f in p.factors] == [("SEX", "between"), ("GAIT", "within"), ("BODY", "within"), ("MOTION", "within")]
     assert p.participants == 16 and p.repetitions == 2 and p.clip.duration_s == 4
     assert p.response.labels[0] == "Very Inconsistent" and p.response.labels[-1] == "Very Consistent"
+
+
+def test_unlooped_clip_too_short_for_one_cycle_suggests_no_impossible_fix(tmp_path, run_cli):
+    """cycles is already 1 (the fewest): only a longer clip helps, so 'lower clip.cycles' is not offered."""
+    text = replace(replace(EXP1, "cycles: 2", "cycles: 1\n  loop: false"), "duration_s: 4 ", "duration_s: 0.5 ")
+    path = tmp_path / "short.yaml"
+    path.write_text(text)
+    code, _, stderr = run_cli("validate", path)
+    message = " ".join(stderr.split())
+    assert code == 2 and "Traceback" not in stderr
+    assert "clip.duration_s (line 56)" in message and "duration_s >= 1.07 s" in message
+    assert "lower clip.cycles" not in message
