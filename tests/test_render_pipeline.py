@@ -237,3 +237,53 @@ def test_familiarization_clip_shows_the_body_alone(short_protocol, tmp_path):
     row = _manifest(out)[0]
     assert report.rendered == ["fam-F_Lo2"] and row["kind"] == "familiarization"
     assert row["left"] == row["right"] == "" and row["practice"] == "1"
+
+
+@pytest.mark.parametrize("settings, expected", [
+    # Renamed levels: the motion comes from level_settings, not from the name "NoCOM".
+    ({"levels": ["Avg", "Phys"], "abbreviations": {}, "level_settings": {"Avg": {"motion": "average"},
+                                                                          "Phys": {"motion": "physics"}}},
+     {"Avg": "nocom/F_walk.npz", "Phys": "motions/COM_F_Hi1_walk.npz"}),
+    # The setting wins over the name.
+    ({"level_settings": {"NoCOM": {"motion": "physics"}, "COM": {"motion": "average"}}},
+     {"NoCOM": "motions/COM_F_Hi1_walk.npz", "COM": "nocom/F_walk.npz"}),
+    # No setting: the name decides (NoCOM = average, any other = physics), as before.
+    ({"level_settings": {}}, {"NoCOM": "nocom/F_walk.npz", "COM": "motions/COM_F_Hi1_walk.npz"}),
+])
+def test_method_motion_follows_level_settings(settings, expected, protocol_path, tmp_path):
+    """Bad-input audit: METHOD levels named [Avg, Phys] passed validation but both read the COM file."""
+    from stimuli.design import build_design
+    from stimuli.protocol import load_protocol
+    from stimuli.render.sources import motion_files
+
+    data = yaml.safe_load(protocol_path("exp2_com_vs_average").read_text())
+    data["factors"][3].update(settings)
+    path = tmp_path / "renamed.yaml"
+    path.write_text(yaml.safe_dump(data))
+    protocol = load_protocol(path)
+    stimulus = next(s for s in build_design(protocol).stimuli
+                    if s.kind == "test" and s.body_actor == "F_Hi1" and "walk" in s.levels.values())
+    files = motion_files(protocol, stimulus, tmp_path / "motions")
+    got = {level: str(f.relative_to(tmp_path / "motions")) for level, f in zip(stimulus.arrangement, files)}
+    assert got == expected
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--resolution", "7682x90"], "--resolution: width 7682 is outside 64–7680 pixels"),
+    (["--resolution", "62x90"], "--resolution: width 62 is outside 64–7680 pixels"),
+    (["--resolution", "160x4322"], "--resolution: height 4322 is outside 64–4320 pixels"),
+    (["--fps", "241"], "--fps: expected a whole number of frames per second from 5 to 240"),
+    (["--fps", "4"], "--fps: expected a whole number of frames per second from 5 to 240"),
+    (["--fps", "0"], "--fps: expected a whole number of frames per second from 5 to 240"),
+    # 1 jog cycle at 138 steps/min is 0.87 s: 4 frames at 5 fps, too few for the generator
+    (["--fps", "5"], "--fps 5: 1 cycle(s) of jog at 138 steps/min last only 4 frames at 5 fps"),
+])
+def test_render_options_beyond_the_protocol_bounds_stop_before_any_output(args, message, short_protocol, tmp_path,
+                                                                          run_cli):
+    """Bad-input audit: these rendered (or failed at render time leaving an empty folder)."""
+    out = tmp_path / "y"
+    code, _, err = run_cli("render", short_protocol("exp1_shape_motion"), "--out", out, "--limit", "1",
+                           "--no-progress", *args)
+    assert code == 2 and "Traceback" not in err
+    assert message in " ".join(err.split())
+    assert not out.exists()

@@ -235,7 +235,7 @@ def test_bvh_frames_are_checked_line_by_line(tmp_path, edit, message):
     (["render", "--out", "nodir", "--verify"], "nodir/manifest.csv: not found"),
     (["render", "--out", "dd_empty", "--verify"], "dd_empty/manifest.csv: not found"),
     (["render", EXP1, "--out", "r", "--limit", "0"], "--limit: expected a whole number >= 1, got 0"),
-    (["render", EXP1, "--out", "r", "--fps", "0"], "--fps: expected a frame rate > 0, got 0"),
+    (["render", EXP1, "--out", "r", "--fps", "0"], "--fps: expected a whole number of frames per second from 5 to 240 (the bounds of a protocol's clip.fps), got 0"),
     (["render", EXP1, "--out", "r", "--workers", "0"], "--workers: expected a whole number >= 1"),
     (["render", EXP1, "--out", "r", "--motions", "nodir"], "has no METHOD factor"),
     (["render", EXP2, "--out", "r", "--motions", "nodir"], "--motions nodir: folder not found"),
@@ -399,7 +399,7 @@ def test_preview_options(work, run_cli, extra, message):
 
 @pytest.mark.parametrize("extra, message", [
     (["--format", "qsf", "--out", "s.qsf", "--post-url", "http://x.org/save"], "--post-url: only the jspsych format"),
-    (["--format", "qsf", "--out", "s.qsf", "--video-base-url", "notaurl"], "needs an absolute address"),
+    (["--format", "qsf", "--out", "s.qsf", "--video-base-url", "notaurl"], "expected an absolute address with a host"),
     (["--format", "jspsych", "--out", "js", "--video-base-url", "not a url"], "without spaces"),
     (["--format", "psychopy", "--out", "pp", "--video-base-url", "https://x.org"], "does not use a URL"),
 ])

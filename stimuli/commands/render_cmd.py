@@ -91,12 +91,15 @@ def _check_manifest_present(out_dir: Path) -> None:
 def _check_render_options(args: argparse.Namespace) -> None:
     """Numbers in range, --motions only where the protocol reads it, the output folder usable;
     all before the first clip is rendered."""
-    from stimuli.commands.checks import at_least, positive
+    from stimuli.commands.checks import at_least
     from stimuli.errors import StimuliError
     from stimuli.fileio import check_output_dir
     from stimuli.protocol import load_protocol
 
-    positive("--fps", args.fps, "a frame rate > 0")
+    from stimuli.render.settings import check_fps, parse_resolution
+
+    check_fps(args.fps)
+    parse_resolution(args.resolution)
     at_least("--workers", args.workers, 1)
     at_least("--limit", args.limit, 1)
     check_video_base_url(args.video_base_url)
@@ -115,11 +118,9 @@ def _check_render_options(args: argparse.Namespace) -> None:
 
 def check_video_base_url(url: str | None) -> None:
     """The survey exports include Qualtrics files, whose clips need absolute http(s) addresses."""
-    from stimuli.errors import StimuliError
+    from stimuli.commands.checks import base_url
 
-    if url is not None and (not url.startswith(("http://", "https://")) or any(c.isspace() for c in url)):
-        raise StimuliError(f"--video-base-url {url!r}: expected an absolute address without spaces starting with "
-                           "http:// or https:// (the Qualtrics exports load the clips from it)")
+    base_url("--video-base-url", url, absolute=True)
 
 
 def survey_for_render_folder(protocol_path, out_dir, report, video_base_url=None) -> list[str]:

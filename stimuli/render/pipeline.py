@@ -76,6 +76,16 @@ def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=Fals
     return jobs
 
 
+def check_frames(protocol, fps: int | None, source: str = "protocol") -> None:
+    """Before any folder or clip is made: the frame rate gives the generator enough frames."""
+    from stimuli.render.timing import generator_frames_problem
+
+    problem = generator_frames_problem(protocol, fps) if fps and source == "protocol" else None
+    if problem:
+        option = "--fps" if fps != protocol.clip.fps else "clip.fps"
+        raise StimuliError(f"{option} {fps}: {problem}; use a higher frame rate or a longer clip.duration_s")
+
+
 def is_current(job: Job, row: dict | None) -> bool:
     """A finished clip can be kept: same inputs hash, file present with the recorded SHA-256."""
     from stimuli.render.video import sha256_file
@@ -133,6 +143,7 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     design = build_design(protocol)
     order = [s.stimulus_id for s in design.stimuli]
     jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick, motions_dir, source)
+    check_frames(protocol, jobs[0].look.fps if jobs else None, source)
     previous = read_manifest(out_dir)
     report = RenderReport(out_dir, warnings=cadence_warnings(protocol, jobs[0].look.fps if jobs else None))
     for line in report.warnings if warn else ():

@@ -20,7 +20,8 @@ QUICK_WIDTH, QUICK_FPS = 320, 15
 
 
 def parse_resolution(text: str | None) -> tuple[int, int] | None:
-    """'1280x720' → (1280, 720); None stays None.
+    """'1280x720' → (1280, 720); None stays None. Even sizes within the bounds a protocol's
+    ``clip.width``/``clip.height`` have (``stimuli.protocol.CLIP_WIDTH_RANGE``/``CLIP_HEIGHT_RANGE``).
 
     >>> parse_resolution("640x360")
     (640, 360)
@@ -32,10 +33,26 @@ def parse_resolution(text: str | None) -> tuple[int, int] | None:
     match = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", str(text))
     if not match:
         raise StimuliError(f"--resolution: expected WIDTHxHEIGHT such as 1280x720, got {text!r}")
+    from stimuli.protocol import CLIP_HEIGHT_RANGE, CLIP_WIDTH_RANGE
+
     width, height = int(match.group(1)), int(match.group(2))
-    if width % 2 or height % 2 or width < 16 or height < 16:
-        raise StimuliError(f"--resolution: width and height must be even and at least 16 (H.264 yuv420p), got {text!r}")
+    if width % 2 or height % 2:
+        raise StimuliError(f"--resolution: width and height must be even (H.264 yuv420p), got {text!r}")
+    for what, value, (low, high) in (("width", width, CLIP_WIDTH_RANGE), ("height", height, CLIP_HEIGHT_RANGE)):
+        if not low <= value <= high:
+            raise StimuliError(f"--resolution: {what} {value} is outside {low}–{high} pixels (the bounds of a "
+                               f"protocol's clip.{what}), got {text!r}")
     return width, height
+
+
+def check_fps(fps) -> None:
+    """``--fps`` within the bounds of a protocol's ``clip.fps`` (None: not given, passes)."""
+    from stimuli.protocol import CLIP_FPS_RANGE
+
+    low, high = CLIP_FPS_RANGE
+    if fps is not None and not low <= fps <= high:
+        raise StimuliError(f"--fps: expected a whole number of frames per second from {low} to {high} (the bounds "
+                           f"of a protocol's clip.fps), got {fps}")
 
 
 def _even(x: float) -> int:
@@ -49,8 +66,7 @@ def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False)
     if quick and resolution is None:
         width, height = QUICK_WIDTH, _even(QUICK_WIDTH * clip.height / clip.width)
     rate = int(fps or (QUICK_FPS if quick else clip.fps))
-    if rate < 1:
-        raise StimuliError(f"--fps: expected a positive frame rate, got {fps}")
+    check_fps(fps)
     azimuth = camera.azimuth_deg
     for factor in protocol.factors:  # e.g. thesis_pointlight: each PARAMETER level has its own view angle
         level = stimulus.levels.get(factor.name)

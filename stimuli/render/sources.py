@@ -1,8 +1,10 @@
 """What each stimulus shows: its bodies and their motions, as :class:`~stimuli.render.clip.Figure` s.
 
 The protocol's ``maps_to`` fields decide: ``body`` → whose body (``Stimulus.body_actor``),
-``motion`` → whose motion (``Stimulus.motion_actor``), ``gait`` → walk/jog, ``method`` → NoCOM
-(the sex × gait average motion) or COM (that motion retargeted by physics onto the body),
+``motion`` → whose motion (``Stimulus.motion_actor``), ``gait`` → walk/jog, ``method`` → the
+level's ``level_settings.motion``: ``average`` (NoCOM, the sex × gait average motion) or ``physics``
+(COM, that motion retargeted by physics onto the body); a level without the setting goes by its
+name (NoCOM = average, any other = physics: ``stimuli.protocol.method_motion_of``),
 ``strength`` → the thesis modifier at a body-fat level, ``source`` → the thesis validation walks
 (both in :mod:`stimuli.render.thesis_sources`).
 Where a motion source is not available yet, :class:`MissingSource` (a ``StimuliError``) names it.
@@ -161,8 +163,13 @@ def on_rig(motion, body):
 
 
 def _method_file(protocol, method: str, stimulus, gait: str, sex: str) -> str:
-    """Where the physics step keeps a METHOD motion, relative to its output folder."""
-    return f"nocom/{sex}_{gait}.npz" if method == "NoCOM" else f"motions/COM_{stimulus.body_actor}_{gait}.npz"
+    """Where the physics step keeps the motion of METHOD level ``method``, relative to its output
+    folder: the average (NoCOM) or the physics (COM) motion, as the level's setting says."""
+    from stimuli.protocol import method_motion_of
+
+    factor = protocol.factor_mapped_to("method")
+    kind = method_motion_of(factor, method) if factor is not None else ("average" if method == "NoCOM" else "physics")
+    return f"nocom/{sex}_{gait}.npz" if kind == "average" else f"motions/COM_{stimulus.body_actor}_{gait}.npz"
 
 
 def motion_files(protocol, stimulus, motions_dir=None) -> list:

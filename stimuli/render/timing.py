@@ -92,6 +92,25 @@ def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float,
                    whole_cycles(duration_s, cadence_spm), bool(loop), float(fps))
 
 
+# The motion generator needs this many frames for the gait cycles of a clip (stimuli.motion.generate).
+GENERATOR_MIN_FRAMES = 8
+
+
+def generator_frames_problem(protocol, fps: int) -> str | None:
+    """Why the generator cannot make the protocol's gaits at ``fps`` (too few frames for the gait
+    cycles a clip holds), or None. Only for protocols whose clips show generated walks (no
+    alternatives factor: ``stimuli.render.sources.actor_motion``)."""
+    if protocol.factors_with_role("alternatives"):
+        return None
+    for name, spec in protocol.gaits.items():
+        cycles = whole_cycles(protocol.clip.duration_s, spec.cadence_spm)
+        frames = int(round(cycles * 120.0 / spec.cadence_spm * fps))
+        if frames < GENERATOR_MIN_FRAMES:
+            return (f"{cycles} cycle(s) of {name} at {spec.cadence_spm:g} steps/min last only {frames} frames at "
+                    f"{fps} fps, and a generated gait needs at least {GENERATOR_MIN_FRAMES}")
+    return None
+
+
 def protocol_fits(protocol, fps: int | None = None) -> list[GaitFit]:
     """The fit of every gait the protocol declares, at the protocol's clip duration (and frame rate,
     unless ``fps`` overrides it as ``render --fps``/``--quick`` do)."""
