@@ -197,3 +197,17 @@ def test_optional_girth_targets_move_the_body_towards_them():
     wide = fit_body("M", 1.80, 25.0, hip_m=plain.anthropometry.hip_m + 0.05, use_cache=False)
     assert wide.fit.reachable and abs(wide.anthropometry.bmi - 25.0) <= 0.5
     assert wide.anthropometry.hip_m > plain.anthropometry.hip_m + 0.01
+
+
+def test_warp_no_cuda_line_is_held_back_and_other_native_output_passes(capfd):
+    """Warp's native 'no CUDA driver' line was printed twice per render on every CPU machine; any other line
+    its native code writes to stderr must still reach the user."""
+    import os
+
+    from stimuli.bodies.backend import NO_CUDA_DRIVER, _native_stderr_without
+
+    with _native_stderr_without(NO_CUDA_DRIVER):
+        os.write(2, f"Warp CUDA warning: {NO_CUDA_DRIVER}. GPU execution will not be available.\n".encode())
+        os.write(2, b"something else went wrong\n")
+    err = capfd.readouterr().err
+    assert NO_CUDA_DRIVER not in err and "something else went wrong" in err

@@ -8,9 +8,12 @@ cache (about 1 min, 0.8 GB), later loads take well under a second.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib.metadata
 import os
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -61,6 +64,29 @@ def anny_version() -> str:
         return "unknown"
 
 
+# Warp's native library says this on stderr at start-up on every machine without an NVIDIA GPU, twice
+# per render (one per worker): Anny's skinning runs on the CPU, so it tells the user nothing.
+NO_CUDA_DRIVER = "Could not find or load the NVIDIA CUDA driver"
+
+
+@contextlib.contextmanager
+def _native_stderr_without(benign: str):
+    """Hold back one known line that native code writes to file descriptor 2; pass every other line on."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            held.seek(0)
+            for line in held.read().decode(errors="replace").splitlines():
+                if benign not in line:
+                    print(line, file=sys.stderr)
+
+
 @functools.lru_cache(maxsize=1)
 def model():
     """The Anny full-body model (default rig and topology), loaded once per process.
@@ -75,6 +101,8 @@ def model():
     import warp
 
     warp.config.log_level = warp.LOG_WARNING  # its start-up banner would repeat in every render worker's output
+    with _native_stderr_without(NO_CUDA_DRIVER):
+        warp.init()
     import anny
     from anny.paths import set_anny_cache_path
 
