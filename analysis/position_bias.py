@@ -109,9 +109,32 @@ def _participant_table(counts: pd.DataFrame) -> pd.DataFrame:
     return people
 
 
+def first_ranked_positions(data: pd.DataFrame, design: DesignInfo) -> pd.Series:
+    """For ranking rows, the 1-based screen position of the clip ranked first (a ranking's 'choice').
+
+    >>> from types import SimpleNamespace
+    >>> design = SimpleNamespace(arrangement=lambda sid: {"s1": ["A", "B", "C"]}[sid])
+    >>> first_ranked_positions(pd.DataFrame({"stimulus_id": ["s1", "s1"], "ranking": ["B>A>C", "C>B>A"]}),
+    ...                        design).tolist()
+    [2, 3]
+    """
+    def position(sid, ranking):
+        arrangement, first = design.arrangement(sid), str(ranking).split(">")[0]
+        return arrangement.index(first) + 1 if first in arrangement else pd.NA
+
+    return pd.Series([position(sid, r) for sid, r in zip(data["stimulus_id"], data["ranking"])],
+                     index=data.index, dtype="Int64")
+
+
 def position_section(data: pd.DataFrame, design: DesignInfo, out: Path) -> dict | None:
-    """The report section of the check (files ``position_bias.*``); None without choices or positions."""
-    if design.response_type != "afc" or "position" not in data:
+    """The report section of the check (files ``position_bias.*``); None without choices or positions.
+
+    A ranking's 'choice' is the clip it ranks first: a participant who ranks the leftmost clip first
+    every time answers by position as much as one who always picks the left clip.
+    """
+    if design.response_type == "ranking" and "ranking" in data:
+        data = data.assign(position=first_ranked_positions(data, design))
+    elif design.response_type != "afc" or "position" not in data:
         return None
     names = position_names(design)
     counts = position_counts(data, names)
@@ -132,7 +155,9 @@ def position_section(data: pd.DataFrame, design: DesignInfo, out: Path) -> dict 
             "participant is the unit: each participant's share of choices per position is tested against chance with a "
             "one-sample t-test (a binomial test of all choices pooled would treat one person's choices as "
             "independent)." + (" For k > 2 positions a Friedman test compares all positions at once."
-                               if len(names) > 2 else ""))
+                               if len(names) > 2 else "")
+            + (" In a ranking, a participant's choice is the clip ranked first." if design.response_type == "ranking"
+               else ""))
     if infinite:
         note += (f" t is infinite for {', '.join(infinite)}: every participant chose that position with the "
                  f"same share (no spread between participants), so the t statistic is ±∞ and p is 0. The JSON "

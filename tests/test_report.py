@@ -498,3 +498,19 @@ def test_report_says_which_dependent_measure_and_that_it_was_the_default(reports
     explicit = analyze(folder / "design", folder / "responses.csv", tmp_path / "report2", models=False)
     assert explicit["design"]["dependent_measure_source"] != "default"
     assert "as set by design.json field" in explicit["design"]["dependent_measure_note"]
+
+
+def test_ranking_report_checks_the_position_of_the_clip_ranked_first(reports, tmp_path):
+    """A ranking's 'choice' is its first place: a participant who always ranks the leftmost clip first answers by
+    position. The thesis validation row (4 clips A–D) got no position check at all."""
+    folder, summary = reports["thesis_validation"]
+    report = folder / "report"
+    section = next(s for s in summary["sections"] if s["results"].get("check") == "position")
+    tidy = pd.read_csv(report / "responses_tidy.csv", keep_default_na=False)
+    design = load_design(folder / "design")
+    tests = tidy[tidy["practice"].astype(str).str.lower() == "false"]
+    first = [design.arrangement(s).index(r.split(">")[0]) + 1 for s, r in zip(tests["stimulus_id"], tests["ranking"])]
+    counts = pd.Series(first).value_counts().sort_index()
+    shares = {row["position"]: row["choices"] for row in section["results"]["positions"]}
+    assert list(shares.values()) == [int(counts.get(i, 0)) for i in range(1, len(shares) + 1)]
+    assert (report / "position_bias.json").is_file() and "clip ranked first" in (report / "report.html").read_text()
