@@ -131,7 +131,7 @@ def run_power(args) -> int:
     from analysis.io_files import atomic_write_text, check_output_file
     from analysis.model_spec import load_model
     from analysis.power import check_target, power_sweep, required_participants, required_text
-    from analysis.simulate import check_seed
+    from analysis.simulate import check_seed, list_reuse_note
     # options first: a bad one must not cost a whole simulation before it is reported
     if args.csv:
         check_output_file(args.csv, "--csv", _inputs(args))
@@ -140,6 +140,9 @@ def run_power(args) -> int:
     design = load_design(args.dir)
     model = load_model(args.model, design)
     _note_null_model(args, model, design)
+    reuse = list_reuse_note(design, max(args.participants))   # as simulate says: data sets beyond N repeat lists
+    if reuse:
+        print(f"note: {reuse}", file=sys.stderr)
     if args.alpha is not None and not 0 < args.alpha < 1:
         raise AnalysisError(f"--alpha: expected a number between 0 and 1, got {args.alpha}")
     table = power_sweep(design, model, args.participants, args.sims, args.seed, args.alpha,

@@ -115,6 +115,9 @@ def test_cli_power_table_json_and_errors(designs, run_cli, tmp_path):
     assert (tmp_path / "p.csv").read_text().startswith("participants,effect,rejections")
     again = run_cli("power", folder, "--participants", "8", "--sims", "100", "--json", "--csv", str(tmp_path / "q.csv"))
     assert again[1] == out and (tmp_path / "q.csv").read_bytes() == (tmp_path / "p.csv").read_bytes()  # no timings
+    # beyond the design's participants every data set repeats its lists: said, as simulate says it
+    code, _, err = run_cli("power", folder, "--participants", "8", "64", "--sims", "20")
+    assert code == 0 and "simulating 64 reuses their lists" in " ".join(err.split())
     code, _, err = run_cli("power", folder, "--participants", "8", "--sims", "0")
     assert code == 2 and "--sims" in err
     code, _, err = run_cli("power", str(tmp_path / "missing"), "--participants", "8", "--sims", "10")
