@@ -12,7 +12,10 @@ every actuator's torque is limited, per direction, to what the body needs at its
 peak over the recorded pass, times ``--margin``): the same muscles carrying more mass. ``--gait
 jog`` sweeps the jog (its own gains) instead of the walk.
 
-    python benchmarks/physics_mass_sweep.py [--sex F|M] [--gait walk|jog] [--strength [--margin 1.0]]
+``--gain-scales 0.03,0.01`` sweeps other gain scales (the shipped set is 1, 0.25, 0.1).
+
+    python benchmarks/physics_mass_sweep.py [--sex F|M] [--gait walk|jog] [--gain-scales S,...]
+                                            [--strength [--margin 1.0]]
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ def main() -> None:
     parser.add_argument("--gait", choices=("walk", "jog"), default="walk")
     parser.add_argument("--strength", action="store_true", help="limit torques to the own-weight peaks")
     parser.add_argument("--margin", type=float, default=1.0, help="limits = own-weight peaks × margin")
+    parser.add_argument("--gain-scales", type=_scales, default=GAIN_SCALES, help="comma-separated k_p factors")
     args = parser.parse_args()
     sex, gait = args.sex, args.gait
 
@@ -59,10 +63,21 @@ def main() -> None:
         for factor in WEIGHT_FACTORS:
             print_row(f"{args.margin:>5.2f}s", own * factor, run(motion, body, own * factor, shipped, limits), start, n_cycles)
         return
-    for scale in GAIN_SCALES:
+    for scale in args.gain_scales:
         gains = dataclasses.replace(shipped, k_p=shipped.k_p * scale, k_d=shipped.k_d * np.sqrt(scale))
         for factor in WEIGHT_FACTORS:
             print_row(f"{scale:>6.2f}", own * factor, run(motion, body, own * factor, gains), start, n_cycles)
+
+
+def _scales(text: str) -> tuple[float, ...]:
+    """``"1,0.1"`` → ``(1.0, 0.1)``; positive factors only."""
+    try:
+        scales = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+    if not scales or min(scales) <= 0:
+        raise argparse.ArgumentTypeError(f"gain scales must be > 0, got {text!r}")
+    return scales
 
 
 def run(motion, body, weight_kg: float, gains, limits: dict | None = None):
