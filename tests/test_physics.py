@@ -132,6 +132,21 @@ def test_fall_is_reported_not_hidden(walk, bodies):
         retarget(walk, bodies["ref"], gains=weak, raise_on_fall=True)
 
 
+def test_divergence_is_a_fall_and_leaves_no_mujoco_log(walk, bodies, tmp_path, monkeypatch, capsys):
+    """Gains far past the step's stability limit blow the simulation up: reported as a fall, with
+    MuJoCo's warning on stderr and no MUJOCO_LOG.TXT dropped into the working directory."""
+    from stimuli.physics.retarget import prepare
+    from stimuli.physics.simulate import simulate
+
+    monkeypatch.chdir(tmp_path)
+    ref, _, model, gains = prepare(walk, bodies["ref"])
+    model.dof_damping[6:] = -1e9   # negative damping: the joints' energy explodes within a few steps
+    sim = simulate(model, ref, gains)
+    assert sim.fell and "diverged" in sim.fall_reason, sim.fall_reason
+    assert "warning: MuJoCo: Nan, Inf or huge value in QACC" in capsys.readouterr().err
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
 def test_trunk_folding_over_a_held_pelvis_is_a_fall(walk, bodies):
     """The root wrench keeps the pelvis up; a trunk without spine torque folds over it: that is a fall."""
     from stimuli.physics.retarget import prepare

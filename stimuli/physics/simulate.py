@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import time
 
 import numpy as np
@@ -119,6 +120,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     """
     import mujoco
 
+    mujoco.set_mju_user_warning(_mujoco_warning)
     k = steps_per_frame(ref.fps, rate_hz)
     dt = 1.0 / (ref.fps * k)
     model.opt.timestep = dt
@@ -173,6 +175,12 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         step_times=np.arange(first, i + 1) * dt, fell=fell, fall_time_s=fall_time, fall_reason=reason,
         simulated_s=simulated, wall_s=wall, body_names=[model.body(b).name for b in range(model.nbody)],
         dof_names=[model.actuator(a).name for a in range(model.nu)])
+
+
+def _mujoco_warning(message: str) -> None:
+    """MuJoCo's warnings on stderr. Its own handler prints them on stdout and appends them to a
+    ``MUJOCO_LOG.TXT`` it creates in the user's working directory."""
+    print(f"warning: MuJoCo: {message}", file=sys.stderr)
 
 
 def _record(rec: dict, data, target: dict, i: int, dof_adr: np.ndarray, pelvis: int) -> None:
