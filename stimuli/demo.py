@@ -57,10 +57,12 @@ def run_demo(out: Path, quick: bool = False) -> dict[str, list[Path]]:
     with _step("physics"):
         from stimuli.physics.protocol_step import run_protocol
 
-        result = run_protocol(bundled_protocol("exp2_com_vs_average"), physics_dir, progress=lambda m: None)
+        result = run_protocol(bundled_protocol("exp2_com_vs_average"), physics_dir)
         made["physics"] = [Path(f) for f in result["figures"]]
         fell = sum(r["fell"] for r in result["reports"])
         print(f"  {len(result['reports'])} COM motions ({fell} fell), Fig. 7 → {made['physics'][0]}")
+        for line in result["warnings"]:   # e.g. a motions folder whose walks hop
+            print(f"    warning: {line}")
     with _step("render"):
         from stimuli.render import render_protocol
 

@@ -292,6 +292,26 @@ def test_protocol_step_exp2(run_cli, protocol_path, tmp_path):
     assert (jogs.flight_fraction > 0.15).all() and (jogs.knee_extension_moment_peak_nm_per_kg < 3.5).all(), jogs
 
 
+def test_protocol_step_reads_the_motions_own_body_as_retarget_does(protocol_path):
+    """`physics protocol` and `physics retarget` take one reference body from one NoCOM file: a
+    motion recording ``weight_kg`` (no ``bmi``) used to fall back to the protocol's mean actor."""
+    from types import SimpleNamespace
+
+    from stimuli.physics.protocol_step import reference_targets
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol(protocol_path("exp2_com_vs_average"))
+    (h, bmi), note = reference_targets(protocol, "F", SimpleNamespace(metadata={"height_m": 1.6, "weight_kg": 64.0}))
+    assert (h, bmi) == (1.6, pytest.approx(25.0)) and note == ""
+    assert reference_targets(protocol, "F", SimpleNamespace(metadata={"height_m": 1.6, "bmi": 22.0}))[0] == (1.6, 22.0)
+    mean, note = reference_targets(protocol, "F", SimpleNamespace(metadata={}), "motions/F_walk.npz")
+    actors = [a for a in protocol.actors if a.sex == "F" and not a.practice_only]
+    assert mean == pytest.approx((np.mean([a.height_m for a in actors]), np.mean([a.bmi for a in actors])))
+    assert note.startswith("motions/F_walk.npz records no height") and "mean F test actor" in note
+    with pytest.raises(StimuliError, match=r"F_walk.npz: metadata weight_kg is 'heavy'; expected a number"):
+        reference_targets(protocol, "F", SimpleNamespace(metadata={"height_m": 1.6, "weight_kg": "heavy"}), "F_walk.npz")
+
+
 def test_frame_contacts_window_the_simulated_steps_and_bridge_short_gaps():
     """A foot is down in a frame when it touched the floor within half a frame of it; gaps of up to
     two frames inside a contact (a toe tapping down again at push-off) are bridged; the pass wraps."""
@@ -470,7 +490,7 @@ def test_knee_flexion_is_the_joint_centre_angle_and_mass_barely_moves_it(walk, b
     assert abs(c["knee_flexion_peak_deg"] - curves["lo"]["knee_flexion_peak_deg"]) < 0.2
 
 
-@pytest.mark.parametrize("module", ["stimuli.physics.analysis_fig7", "stimuli.physics.controller", "stimuli.physics.inertia",
+@pytest.mark.parametrize("module", ["stimuli.physics.analysis_fig7", "stimuli.physics.controller", "stimuli.physics.inertia", "stimuli.physics.own_body",
                                     "stimuli.physics.protocol_step", "stimuli.physics.retarget", "stimuli.physics.tune",
                                     "stimuli.motion.loop", "stimuli.motion.normative", "stimuli.motion.footfix",
                                     "stimuli.motion.running"])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -79,36 +78,24 @@ def _reference(args, motion) -> tuple[float, float, str, str]:
     """Height (m) and weight (kg) of the motion's own body, and where each came from (for messages):
     the options, else the motion's metadata, else the target's (then b = 0, and a warning says so: the
     COM change is measured against it)."""
+    from stimuli.physics.own_body import own_body
+
+    own = own_body(motion, args.motion, hint=", or give the reference body with --reference-height/--reference-weight")
     height, h_from = args.reference_height, "--reference-height"
-    if height is None:
-        height, h_from = _meta_number(args.motion, motion, "height_m", "metres"), f"{args.motion}: metadata height_m"
+    if height is None and own.height_m is not None:
+        height, h_from = own.height_m, f"{args.motion}: metadata height_m"
     if height is None:
         height, h_from = args.height, "--height"
     if args.reference_weight is not None:
         return float(height), float(args.reference_weight), h_from, "--reference-weight"
-    weight = _meta_number(args.motion, motion, "weight_kg", "kilograms")
+    weight = own.weight_at(float(height))
     if weight is not None:
-        return float(height), weight, h_from, f"{args.motion}: metadata weight_kg"
-    bmi = _meta_number(args.motion, motion, "bmi", "kg/m²")
-    if bmi is not None:
-        return float(height), bmi * float(height) ** 2, h_from, f"{args.motion}: metadata bmi"
+        return float(height), weight[0], h_from, f"{args.motion}: metadata {weight[1]}"
     print(f"warning: {args.motion} records no weight or BMI of its own body, so the target's "
           f"{args.weight:g} kg is taken as the reference weight"
           + (" (and its height): b = 0" if height == args.height else "")
           + "; give --reference-weight (and --reference-height) for the motion's own body", file=sys.stderr)
     return float(height), float(args.weight), h_from, "--weight"
-
-
-def _meta_number(path, motion, field: str, unit: str) -> float | None:
-    """A body figure from the motion's metadata (None when absent); anything but a finite number is an error
-    naming the file and field, where it used to end in a TypeError."""
-    value = motion.metadata.get(field)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise StimuliError(f"{path}: metadata {field} is {value!r}; expected a number ({unit}), or give the "
-                           f"reference body with --reference-height/--reference-weight")
-    return float(value)
 
 
 def run_retarget(args: argparse.Namespace) -> int:
@@ -212,7 +199,9 @@ def _write_report(path: Path, report: dict) -> None:
 def run_protocol(args: argparse.Namespace) -> int:
     from stimuli.physics.protocol_step import run_protocol as run
 
-    result = run(args.protocol, args.out, args.motions, workers=args.workers)
+    result = run(args.protocol, args.out, args.motions, workers=args.workers, progress=print)
+    for line in result["warnings"]:
+        print(f"warning: {line}", file=sys.stderr)
     print(f"{args.out}: {len(result['reports'])} COM motion(s), figures: "
           + ", ".join(str(p) for p in result["figures"]))
     return 0

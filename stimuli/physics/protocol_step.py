@@ -3,8 +3,8 @@
 For each sex × gait the NoCOM motion is ``<motions>/<sex>_<gait>.npz`` when a motions folder is
 given, otherwise the DTW average of the protocol's test actors of that sex over the whole number
 of gait cycles that fills the clip. The reference body (for b) is the body the NoCOM motion
-belongs to: its metadata ``height_m``/``bmi`` when present, else the mean height and BMI of the
-protocol's test actors of that sex. Each COM motion is cached under
+belongs to: its metadata ``height_m`` and ``weight_kg`` or ``bmi`` (read as ``physics retarget``
+reads them), else the mean height and BMI of the protocol's test actors of that sex, with a warning. Each COM motion is cached under
 ``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the gains file and the code
 that makes it (the body, motion and physics packages), so a second run only copies files.
 """
@@ -32,15 +32,28 @@ def cache_dir() -> Path:
     return project_cache_root() / "physics"
 
 
-def reference_targets(protocol, sex: str, motion=None) -> tuple[float, float]:
-    """(height_m, bmi) of the reference body of a sex: from the motion's metadata, else the mean."""
-    meta = motion.metadata if motion is not None else {}
-    if "height_m" in meta and "bmi" in meta:
-        return float(meta["height_m"]), float(meta["bmi"])
+def reference_targets(protocol, sex: str, motion=None, where="NoCOM motion") -> tuple[tuple[float, float], str]:
+    """(height_m, bmi) of the reference body of a sex, and a note when it is a guess.
+
+    The body the NoCOM motion records (:func:`stimuli.physics.own_body.own_body`, read as
+    ``physics retarget`` reads it: ``weight_kg`` before ``bmi``); a motion that records no height
+    or neither weight nor BMI gets the mean height and BMI of the protocol's test actors of that
+    sex, and the note says so.
+    """
+    from stimuli.physics.own_body import own_body
+
+    if motion is not None:
+        own = own_body(motion, where, hint=" (the height and weight or BMI of the body the motion was made on)")
+        if own.height_m is not None and own.weight_kg is not None:
+            return (own.height_m, own.weight_kg / own.height_m ** 2), ""
+        if own.height_m is not None and own.bmi is not None:
+            return (own.height_m, own.bmi), ""
     actors = [a for a in protocol.actors if a.sex == sex and not a.practice_only]
     if not actors:
         raise StimuliError(f"protocol {protocol.name}: no test actors of sex {sex}")
-    return float(np.mean([a.height_m for a in actors])), float(np.mean([a.bmi for a in actors]))
+    mean = float(np.mean([a.height_m for a in actors])), float(np.mean([a.bmi for a in actors]))
+    return mean, (f"{where} records no height and weight or BMI of its own body: b is measured against the "
+                  f"mean {sex} test actor ({mean[0]:.2f} m, BMI {mean[1]:.1f})")
 
 
 def nocom_motion(protocol, sex: str, gait: str, motions_dir: Path | None):
@@ -119,8 +132,13 @@ def _job(args: dict) -> dict:
 
 
 def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | Path | None = None,
-                 workers: int = 2, progress=print) -> dict:
-    """Make every COM motion of the protocol under ``out``; returns {"reports": [...], "figures": [...]}."""
+                 workers: int = 2, progress=None) -> dict:
+    """Make every COM motion of the protocol under ``out``.
+
+    Returns ``{"reports": [...], "figures": [...], "warnings": [...]}``; ``progress`` (optional) is
+    called with a line per simulated motion.
+    """
+    progress = progress or (lambda line: None)
     from stimuli.physics.analysis_fig7 import plot_fig7
     from stimuli.physics.controller import GAINS_FILE
     from stimuli.protocol import load_protocol
@@ -134,12 +152,15 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     cache = cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     gains_text = GAINS_FILE.read_text()
-    jobs, cached = [], []
+    jobs, cached, notes = [], [], []
     for gait in protocol.gaits:
         for sex in sorted({a.sex for a in protocol.actors}):
             motion = nocom_motion(protocol, sex, gait, Path(motions_dir) if motions_dir else None)
             nocom_path = motion.save(out / "nocom" / f"{sex}_{gait}.npz")
-            reference = reference_targets(protocol, sex, motion)
+            source = Path(motions_dir) / f"{sex}_{gait}.npz" if motions_dir else nocom_path
+            reference, note = reference_targets(protocol, sex, motion, source)
+            if note:
+                notes.append(note)
             for actor in (a for a in protocol.actors if a.sex == sex):
                 spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
                         "weight_kg": actor.weight_kg, "gait": gait, "reference": list(reference)}
@@ -164,13 +185,11 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
         reports.append(report)
     figures = _figures(protocol, reports, out, plot_fig7)
     _summary(reports, out / "summary.csv")
-    for warning in hop_warnings(reports):
-        progress(f"warning: {warning}")
     fell = [f"{r['actor']} ({r['gait']}): {r['fall_reason']}" for r in reports if r["fell"]]
     if fell:
         raise StimuliError(f"{protocol_path}: the ragdoll fell for {len(fell)} COM motion(s): " + "; ".join(fell)
                            + f". Reports are in {out / 'reports'}")
-    return {"reports": reports, "figures": figures}
+    return {"reports": reports, "figures": figures, "warnings": notes + hop_warnings(reports)}
 
 
 # A walk always has a foot on the floor; a simulated walk above this share of airborne steps hops
