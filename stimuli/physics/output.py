@@ -34,7 +34,6 @@ def global_pose(motion: Motion, sim, ref) -> np.ndarray:
     n = sim.xquat.shape[0]
     frames = np.arange(n) % motion.n_frames
     local = motion.rotations[frames].copy()
-    ref_global, _ = motion.global_transforms()
     followed = {j: label for label, j in ref.bones.items()}
     sims = segment_quats(sim, list(ref.bones))
     out_global = np.empty_like(local)

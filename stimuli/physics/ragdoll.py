@@ -100,10 +100,6 @@ class Ragdoll:
     def dof_names(self) -> list[str]:
         return [d for k in self.links for d in k.dofs]
 
-    @property
-    def total_mass(self) -> float:
-        return float(sum(k.mass.mass_kg for k in self.links))
-
 
 def expand_layout():
     """LAYOUT with both sides spelled out (parents before children)."""

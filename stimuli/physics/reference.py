@@ -19,7 +19,6 @@ import dataclasses
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.motion import quat
@@ -119,8 +118,7 @@ def twist_angle(rel: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
 def euler_angles(rel: np.ndarray, order: str) -> np.ndarray:
     """Intrinsic Euler angles (T×3, rad, unwrapped) matching MuJoCo's chained hinges in ``order``."""
-    r = Rotation.from_quat(np.concatenate([rel[:, 1:], rel[:, :1]], axis=1))
-    return np.unwrap(r.as_euler(order), axis=0)
+    return np.unwrap(quat.to_euler(rel, order, degrees=False), axis=0)
 
 
 def leg_length(points: dict[str, np.ndarray]) -> float:

@@ -45,7 +45,6 @@ class SimResult:
     xpos: np.ndarray
     root_target: np.ndarray
     pelvis_com: np.ndarray
-    body_com: np.ndarray
     actuator_force: np.ndarray   # every simulation step of the recorded pass × actuator (N·m)
     foot_contact: np.ndarray
     step_times: np.ndarray
@@ -137,7 +136,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     trunk = model.body("spine").id
     foot_geoms = [model.geom(f"foot.{s}").id for s in "LR"]
     _initial_state(model, data, target, dof_adr)
-    rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "pelvis_com", "body_com")}
+    rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "pelvis_com")}
     forces = np.zeros((n_steps, model.nu))
     contact = np.zeros((n_steps, 2), bool)
     target_height = target["root_pos"][:, 1]
@@ -166,7 +165,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     out = {key: np.array(v) for key, v in rec.items()}
     if not rec["qpos"]:  # fell during the warm-up: empty arrays of the right shapes
         shapes = {"qpos": model.nq, "q": model.nu, "qref": model.nu, "xquat": (model.nbody, 4),
-                  "xpos": (model.nbody, 3), "root_target": 3, "pelvis_com": 3, "body_com": 3}
+                  "xpos": (model.nbody, 3), "root_target": 3, "pelvis_com": 3}
         out = {key: np.zeros((0, *np.atleast_1d(shape))) for key, shape in shapes.items()}
     first = start_frame * k
     return SimResult(
@@ -191,7 +190,6 @@ def _record(rec: dict, data, target: dict, i: int, dof_adr: np.ndarray, pelvis: 
     rec["xpos"].append(data.xpos.copy())
     rec["root_target"].append(target["root_pos"][i].copy())
     rec["pelvis_com"].append(data.xipos[pelvis].copy())
-    rec["body_com"].append(data.subtree_com[pelvis].copy())
 
 
 def _fall_reason(data, pelvis: int, trunk: int, target: dict, i: int, target_height: float) -> str:
