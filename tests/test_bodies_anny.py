@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from stimuli.bodies import BodyFitError, bodies_for_protocol, fit_body
+from stimuli.bodies import BodyFitError, fit_body, fit_protocol_bodies
 from stimuli.protocol import load_protocol
 
 pytestmark = pytest.mark.slow
@@ -27,7 +27,7 @@ PROTOCOLS = Path(__file__).resolve().parents[1] / "protocols"
 
 @pytest.fixture(scope="module")
 def exp1_bodies():
-    bodies = bodies_for_protocol(load_protocol(PROTOCOLS / "exp1_shape_motion.yaml"), use_cache=False)
+    bodies = fit_protocol_bodies(load_protocol(PROTOCOLS / "exp1_shape_motion.yaml"), progress=False, use_cache=False)
     return {b.body_id: b for b in bodies}
 
 

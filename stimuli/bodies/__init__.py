@@ -4,10 +4,10 @@ See docs/readme_bodies.md for the API contract. Everything is in the project fra
 y up, faces +z, feet on y = 0); heavy libraries (torch, anny) load on first use.
 """
 
-from stimuli.bodies.api import BodyFitError, bodies_for_protocol, body_for_actor, fit_body
+from stimuli.bodies.api import BodyFitError, body_for_actor, fit_body, fit_protocol_bodies
 from stimuli.bodies.body import Body, FitReport
 from stimuli.bodies.contact_sheet import contact_sheet
-from stimuli.bodies.export import fit_protocol_bodies, write_bodies
+from stimuli.bodies.export import write_bodies
 from stimuli.bodies.measure import Anthropometry
 from stimuli.bodies.rig import Rig
 from stimuli.bodies.segments import TABLE1, Segment
@@ -22,4 +22,4 @@ MAIN_BONES = {
 }
 
 __all__ = ["Anthropometry", "Body", "BodyFitError", "FitReport", "MAIN_BONES", "Rig", "Segment", "TABLE1",
-           "bodies_for_protocol", "body_for_actor", "contact_sheet", "fit_body", "fit_protocol_bodies", "write_bodies"]
+           "body_for_actor", "contact_sheet", "fit_body", "fit_protocol_bodies", "write_bodies"]

@@ -138,11 +138,22 @@ def body_for_actor(actor, **kwargs) -> Body:
                     body_id=actor.id, **kwargs)
 
 
-def bodies_for_protocol(protocol, include_practice: bool = True, progress: bool = False, **kwargs) -> list[Body]:
-    """Bodies of every actor of a protocol, in protocol order (cached after the first run)."""
-    actors = [a for a in protocol.actors if include_practice or not getattr(a, "practice_only", False)]
-    if progress:
-        from tqdm import tqdm
+def fit_protocol_bodies(protocol, allow_nearest: bool = False, progress: bool = True, include_practice: bool = True,
+                        **kwargs) -> list[Body]:
+    """Every actor's body, in protocol order (cached after the first fit; ``kwargs`` go to
+    :func:`fit_body`, e.g. ``use_cache``). Unreachable targets are collected and reported together
+    (StimuliError) unless ``allow_nearest``, which keeps the nearest bodies (``fit.reachable`` False)."""
+    from tqdm import tqdm
 
-        actors = tqdm(actors, desc="bodies", unit="body")
-    return [body_for_actor(a, **kwargs) for a in actors]
+    actors = [a for a in protocol.actors if include_practice or not a.practice_only]
+    bodies, problems = [], []
+    for actor in tqdm(actors, desc="bodies", unit="body", disable=not progress):
+        try:
+            bodies.append(body_for_actor(actor, **kwargs))
+        except BodyFitError as exc:
+            problems.append(str(exc))
+            bodies.append(exc.nearest)
+    if problems and not allow_nearest:
+        raise StimuliError(f"protocol {protocol.name}: {len(problems)} actor(s) cannot be built: "
+                           + "; ".join(problems) + " (use --allow-nearest to write the nearest bodies anyway)")
+    return bodies

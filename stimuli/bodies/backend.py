@@ -21,8 +21,6 @@ import numpy as np
 
 # Anny's own density (kg/m³) in anny.Anthropometry: mass = volume × density.
 ANNY_DENSITY = 980.0
-# Anny's phenotype labels exposed by the default model, in its order.
-PHENOTYPE_LABELS = ("gender", "age", "muscle", "weight", "height", "proportions")
 LOAD_SECONDS: dict[str, float] = {}
 
 

@@ -155,7 +155,7 @@ def candidate_girths(anny_out: dict, i: int) -> dict[str, float]:
     }
 
 
-def rest_tails(heads: np.ndarray, parents: np.ndarray, rotations: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+def rest_tails(heads: np.ndarray, parents: np.ndarray, rotations: np.ndarray) -> np.ndarray:
     """A tail per bone: the mean head of its children, else 5 cm along the bone's own y axis
     (Anny's 'cached' bone orientation stores no tails; Blender bones point along local y)."""
     tails = heads + 0.05 * rotations[:, :, 1]
@@ -182,7 +182,7 @@ def assemble_body(body_id, sex, targets, phenotype, vertices, faces, names, pare
     """A Body from project-frame arrays of any backend. ``parts`` holds ``face_seg``, ``trunk_edges``
     and ``hip_edges``; ``skinner`` replaces Anny's skinning (other backends)."""
     rig = Rig(names=names, parents=parents, rest_heads=heads,
-              rest_tails=rest_tails(heads, parents, rotations, vertices), rest_rotations=rotations)
+              rest_tails=rest_tails(heads, parents, rotations), rest_rotations=rotations)
     anthro = measure(vertices, faces, waist_m, _landmarks(heads, names, profile), parts["trunk_edges"],
                      parts["hip_edges"], backend.ANNY_DENSITY)
     segments = build_segments(anthro.mass_kg, heads, names, vertices, faces, parts["face_seg"],

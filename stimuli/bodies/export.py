@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from stimuli.bodies.api import BodyFitError, body_for_actor
-from stimuli.errors import StimuliError
 
 BODIES_COLUMNS = ("body_id", "sex", "target_height_m", "target_bmi", "height_m", "mass_kg", "bmi", "waist_m",
                   "n_vertices", "n_faces", "mesh")
@@ -21,24 +19,6 @@ def _fmt(value, digits: int = 4) -> str:
         text = f"{value:.{digits}f}"
         return text[1:] if text.startswith("-") and float(text) == 0.0 else text  # no "-0.0000"
     return str(value)
-
-
-def fit_protocol_bodies(protocol, allow_nearest: bool = False, progress: bool = True) -> list:
-    """Every actor's body; unreachable targets are collected and reported together (StimuliError)
-    unless ``allow_nearest``, which keeps the nearest bodies (``fit.reachable`` False)."""
-    from tqdm import tqdm
-
-    bodies, problems = [], []
-    for actor in tqdm(protocol.actors, desc="bodies", unit="body", disable=not progress):
-        try:
-            bodies.append(body_for_actor(actor))
-        except BodyFitError as exc:
-            problems.append(str(exc))
-            bodies.append(exc.nearest)
-    if problems and not allow_nearest:
-        raise StimuliError(f"protocol {protocol.name}: {len(problems)} actor(s) cannot be built: "
-                           + "; ".join(problems) + " (use --allow-nearest to write the nearest bodies anyway)")
-    return bodies
 
 
 def body_rows(bodies) -> list[dict[str, str]]:

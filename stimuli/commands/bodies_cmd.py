@@ -67,7 +67,7 @@ def run_bodies(args: argparse.Namespace) -> int:
 
 
 def _run_protocol(args) -> int:
-    from stimuli.bodies.export import fit_protocol_bodies, write_bodies
+    from stimuli.bodies import fit_protocol_bodies, write_bodies
     from stimuli.protocol import load_protocol
 
     protocol = load_protocol(args.protocol)
