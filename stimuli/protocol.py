@@ -228,7 +228,8 @@ class Display(Strict):
     layout: Literal["treadmill", "side_by_side", "point_light", "row"]
     labels: list[str] | None = None
     body: str | None = Field(default=None, description="actor id whose body is shown when no factor maps to body")
-    point_light_markers: int | None = Field(default=None, ge=5, le=40)
+    # The renderer draws the 15 markers of SPEC §1.3 (the thesis's set); other counts were accepted and ignored.
+    point_light_markers: Literal[15] | None = Field(default=None, description="15: the only marker set drawn")
 
 
 class Alternatives(Strict):
@@ -605,6 +606,12 @@ def load_protocol(path: str | Path) -> Protocol:
     return protocol
 
 
+def capture_file(protocol: Protocol, spec: str) -> Path:
+    """The file a ``bvh:<path>`` motion setting names; a relative path starts from the protocol's folder."""
+    path = Path(spec[len("bvh:"):].strip()).expanduser()
+    return path if path.is_absolute() else protocol.folder / path
+
+
 def check_capture_files(protocol: Protocol, path: str | Path) -> None:
     """``motion: "bvh:<path>"`` settings must name files that exist (relative to the protocol's folder).
 
@@ -618,8 +625,7 @@ def check_capture_files(protocol: Protocol, path: str | Path) -> None:
             spec = settings.get("motion")
             if not isinstance(spec, str) or not spec.startswith("bvh:"):
                 continue
-            capture = Path(spec[4:].strip()).expanduser()
-            capture = capture if capture.is_absolute() else protocol.folder / capture
+            capture = capture_file(protocol, spec)
             if not capture.is_file():
                 index = protocol.factors.index(f)
                 line = _line_of(yaml.compose(text), ["factors", index, "level_settings", level, "motion"])

@@ -284,6 +284,8 @@ def _protocol_variant(tmp_path: Path, source: Path, old: str, new: str) -> Path:
     (VALIDATION, "motion: lean_walk", "motion: lean_wlak", "level_settings.lean_mocap.motion: expected one of"),
     (VALIDATION, "motion: lean_walk", 'motion: "bvh:nothere.bvh"', "nothere.bvh not found"),
     (EXP1, 'background: "#ffffff"', 'background: "notacolour"', "clip.background (line"),
+    # the renderer draws SPEC's 15 markers; 12 used to pass validation and be ignored
+    (POINTLIGHT, "point_light_markers: 15", "point_light_markers: 12", "display.point_light_markers (line 44)"),
 ])
 def test_validate_catches_protocol_mistakes(work, run_cli, source, old, new, message):
     path = _protocol_variant(work, source, old, new).relative_to(work)

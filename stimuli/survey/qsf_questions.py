@@ -41,7 +41,7 @@ def _element(survey_id: str, payload: dict) -> dict:
             "SecondaryAttribute": payload["QuestionDescription"], "TertiaryAttribute": None, "Payload": payload}
 
 
-def _base(qid: str, tag: str, html_text: str, qtype: str, selector: str, subselector: str | None) -> dict:
+def _base(tag: str, html_text: str, qtype: str, selector: str, subselector: str | None) -> dict:
     payload = {
         "QuestionText": html_text,
         "DefaultChoices": False,
@@ -60,7 +60,7 @@ def _base(qid: str, tag: str, html_text: str, qtype: str, selector: str, subsele
 
 def descriptive(survey_id: str, qid: str, tag: str, html_text: str, has_video: bool = False) -> dict:
     """A ``DB`` text/graphic question (no answer, no export column)."""
-    payload = _base(qid, tag, html_text, "DB", "TB", None)
+    payload = _base(tag, html_text, "DB", "TB", None)
     payload |= {"ChoiceOrder": [], "Validation": {"Settings": {"Type": "None"}}, "GradingData": [],
                 "Language": [], "NextChoiceId": 4, "NextAnswerId": 1, "QuestionID": qid,
                 "DataVisibility": {"Private": False, "Hidden": False}}
@@ -75,10 +75,10 @@ def video_question(survey_id: str, qid: str, tag: str, html_text: str, protocol:
     ids = [str(i) for i in range(1, len(labels) + 1)]
     choices = {i: {"Display": escape(label)} for i, label in zip(ids, labels)}
     if protocol.response.type == "ranking":
-        payload = _base(qid, tag, html_text, "RO", "DND", "TX")
+        payload = _base(tag, html_text, "RO", "DND", "TX")
         payload["Configuration"] |= {"Stack": False, "StackItemsInBoxes": False}
     else:
-        payload = _base(qid, tag, html_text, "MC", "SAHR", "TX")
+        payload = _base(tag, html_text, "MC", "SAHR", "TX")
         payload["Configuration"] |= {"LabelPosition": "BELOW"}
     payload |= {
         "Choices": choices,
