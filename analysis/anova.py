@@ -211,13 +211,19 @@ class ManyResult:
         """One statistic as a DataFrame (datasets × effects)."""
         return pd.DataFrame(self.arrays[stat], columns=self.effects)
 
-    def rejection_rate(self, alpha: float = 0.05, correction: str = "none") -> pd.Series:
-        """Share of data sets with p < alpha, per effect (``correction`` none/gg/hf where available)."""
+    def rejections(self, alpha: float = 0.05, correction: str = "none") -> pd.Series:
+        """Number of data sets with p < alpha, per effect (``correction`` none/gg/hf where available; an
+        effect with 1 df has no correction and keeps its p; a NaN p is no rejection)."""
         p = self.arrays["p"]
         if correction.lower() != "none":
             key = {"gg": "p_gg", "hf": "p_hf"}[correction.lower()]
             p = np.where(np.isnan(self.arrays[key]), p, self.arrays[key])
-        return pd.Series((p < alpha).mean(axis=0), index=self.effects, name="rejection_rate")
+        return pd.Series((p < alpha).sum(axis=0), index=self.effects, name="rejections")
+
+    def rejection_rate(self, alpha: float = 0.05, correction: str = "none") -> pd.Series:
+        """Share of data sets with p < alpha, per effect (see :meth:`rejections`)."""
+        n = self.arrays["p"].shape[0]
+        return (self.rejections(alpha, correction) / n).rename("rejection_rate")
 
 
 def anova_many(

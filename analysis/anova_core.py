@@ -184,7 +184,7 @@ class CompiledDesign:
         self.design = design
         wnames = tuple(design.within)
         bnames = tuple(design.between)
-        self.within_names, self.between_names = wnames, bnames
+        self.within_names = wnames
         wk = [len(design.within[f]) for f in wnames]
         bk = [len(design.between[f]) for f in bnames]
         n = design.n_subjects

@@ -1,4 +1,5 @@
-"""Long-format data → the subjects × cells matrix of cell means that the ANOVA engine analyses.
+"""Long-format data → the subjects × cells matrix of cell means that the ANOVA engine analyses; and
+:func:`read_anova_csv`, the CSV reader of ``shapemotion anova``.
 
 All checks of the input live here, each raising ``AnalysisError`` with a message that names the column,
 subject, cell or rows at fault. Uses integer codes and ``np.bincount`` rather than pandas group-bys so
@@ -7,13 +8,21 @@ that one Experiment-1-sized analysis stays in the low milliseconds.
 
 from __future__ import annotations
 
+import csv
+import io
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from pandas._libs.parsers import STR_NA_VALUES  # the cells pd.read_csv reads as missing by default
 
 from analysis.anova_core import Design
 from analysis.errors import AnalysisError
+from analysis.practice import practice_flags
+
+# the index name of a frame read by read_anova_csv: its labels are CSV lines, and messages say so
+CSV_LINE = "CSV line"
 
 
 @dataclass(frozen=True)
@@ -28,6 +37,64 @@ def _rows(idx, limit: int = 5) -> str:
     idx = list(idx)
     shown = ", ".join(str(i) for i in idx[:limit])
     return shown + (f" … ({len(idx)} rows)" if len(idx) > limit else "")
+
+
+def _at(index: pd.Index, idx) -> str:
+    """Where rows are: "on CSV line 3, 7" for a frame from :func:`read_anova_csv`, else "at row index 3, 7"."""
+    return f"{'on CSV line' if index.name == CSV_LINE else 'at row index'} {_rows(idx)}"
+
+
+def read_anova_csv(path: str | Path, used: list[str] | tuple[str, ...] = ()) -> pd.DataFrame:
+    """Read a long-format CSV for :func:`analysis.anova.anova`, in one pass over the file.
+
+    The index is the CSV line (line 1 is the header, index name ``"CSV line"``), so that the engine's
+    messages name lines. Refused: a header naming a column twice (pandas would rename the second
+    ``rating.1`` and the analysis would silently use the first), and practice rows (see
+    :func:`check_no_practice_rows`) unless ``practice`` is one of the ``used`` columns.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise AnalysisError(f"{path}: no such file")
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as handle:
+            text = handle.read()
+        header = next(csv.reader(io.StringIO(text, newline="")), [])
+        _check_header(header, path)
+        # the practice cells as written: pandas would read "nan", "NA" or "null" as a blank (test) cell
+        raw_practice = "practice" in header and "practice" not in used
+        options = dict(keep_default_na=False, dtype={"practice": str},
+                       na_values={c: list(STR_NA_VALUES) for c in header if c != "practice"}) if raw_practice else {}
+        data = pd.read_csv(io.StringIO(text, newline=""), **options)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, csv.Error) as exc:
+        raise AnalysisError(f"{path}: not a readable CSV file ({str(exc).strip()})") from None
+    data.index = pd.RangeIndex(2, len(data) + 2, name=CSV_LINE)
+    if raw_practice:
+        check_no_practice_rows(data, path)
+    return data
+
+
+def _check_header(header: list[str], path: Path) -> None:
+    repeated = sorted({h for h in header if header.count(h) > 1})
+    if repeated:
+        where = "; ".join(f"{h!r} in columns {', '.join(str(i + 1) for i, n in enumerate(header) if n == h)}"
+                          for h in repeated)
+        raise AnalysisError(f"{path}: line 1: the header names a column more than once ({where}); "
+                            f"each column needs its own name")
+
+
+def check_no_practice_rows(data: pd.DataFrame, path: str | Path) -> None:
+    """Refuse practice trials (``practice`` true, :func:`analysis.practice.practice_flags`) in a table indexed
+    by CSV line (e.g. ``analyze``'s ``responses_tidy.csv``): their levels (BODY = Prac) would enter the
+    ANOVA as one more level of a factor."""
+    flags = practice_flags(data["practice"], path)
+    if not flags.any():
+        return
+    lines = [str(i) for i in data.index[flags]]
+    shown = ", ".join(lines[:5]) + (f" … ({len(lines)} rows in all)" if len(lines) > 5 else "")
+    raise AnalysisError(f"{path}: {len(lines)} of {len(data)} rows are practice trials (column 'practice' is true "
+                        f"on CSV lines {shown}); the ANOVA would count their levels as conditions. Analyse the "
+                        f"report's cell_values.csv (test trials only, one value per participant and cell) or "
+                        f"drop the practice rows first")
 
 
 def _sort_key(values: np.ndarray) -> np.ndarray:
@@ -65,7 +132,7 @@ def _rare_levels(index, codes: dict, levels: dict, within, scode: np.ndarray, su
             if n_subjects <= max(have) / 2:   # clearly odd, not one subject short of a common level
                 rows = index[codes[f] == i]
                 who = ", ".join(repr(subjects[j]) for j in np.unique(scode[codes[f] == i])[:limit])
-                notes.append(f"level {levels[f][i]!r} of {f} appears only at row index {_rows(rows)} "
+                notes.append(f"level {levels[f][i]!r} of {f} appears only {_at(index, rows)} "
                              f"(subject{'s' if n_subjects > 1 else ''} {who}{' …' if n_subjects > limit else ''})")
     shown = "; ".join(notes[:limit])
     return shown + (f"; and {len(notes) - limit} more such level(s)" if len(notes) > limit else "")
@@ -100,7 +167,7 @@ def prepare(
         na = data[n].isna().to_numpy()
         if na.any():
             raise AnalysisError(
-                f"column {n!r} has {int(na.sum())} missing value(s) (NaN/empty) at row index {_rows(data.index[na])}; "
+                f"column {n!r} has {int(na.sum())} missing value(s) (NaN/empty) {_at(data.index, data.index[na])}; "
                 "drop or fill them before the ANOVA"
             )
     raw = data[dv]
@@ -112,7 +179,7 @@ def prepare(
         vals = ", ".join(repr(v) for v in pd.unique(raw[bad])[:3])
         raise AnalysisError(
             f"dependent variable {dv!r} must be numeric: {int(bad.sum())} value(s) are not finite numbers "
-            f"(e.g. {vals}) at row index {_rows(data.index[bad])}"
+            f"(e.g. {vals}) {_at(data.index, data.index[bad])}"
         )
     if np.ptp(y) == 0:
         raise AnalysisError(f"dependent variable {dv!r} is constant (every value is {y[0]:g}): there is no variance to analyse")

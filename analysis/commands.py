@@ -8,9 +8,7 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-from pathlib import Path
 
 from analysis.errors import AnalysisError
 
@@ -84,87 +82,10 @@ def check_abbreviations(abbreviations: dict, data, factors: list[str]) -> None:
             raise AnalysisError(f"--abbrev {key}={value}: {key!r} is not a level of any factor ({known})")
 
 
-def read_csv(path: str):
-    """Read a CSV for analysis; the index becomes the CSV line number so that errors point at lines."""
-    import csv
-
-    import pandas as pd
-
-    if not Path(path).is_file():
-        raise AnalysisError(f"{path}: no such file")
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as handle:
-            header = next(csv.reader(handle), [])
-        data = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, csv.Error) as exc:
-        raise AnalysisError(f"{path}: not a readable CSV file ({str(exc).strip()})") from None
-    # pandas renames a repeated header to "rating.1" and the analysis would silently use the first one
-    names = list(header)
-    repeated = sorted({h for h in names if names.count(h) > 1})
-    if repeated:
-        where = "; ".join(f"{h!r} in columns {', '.join(str(i + 1) for i, n in enumerate(names) if n == h)}"
-                          for h in repeated)
-        raise AnalysisError(f"{path}: line 1: the header names a column more than once ({where}); "
-                            f"each column needs its own name")
-    data.index = pd.RangeIndex(2, len(data) + 2)  # line 1 is the header
-    return data
-
-
-PRACTICE_TRUE = ("true", "t", "yes", "y", "1", "1.0")
-PRACTICE_FALSE = ("false", "f", "no", "n", "0", "0.0", "")
-
-
-def practice_flags(column, path: str):
-    """The ``practice`` column as booleans: true/false, yes/no, y/n, t/f, 1/0, 1.0/0.0 in any case; a blank
-    cell is a test trial. Any other value is refused, naming its CSV line: a typo must not turn a practice
-    trial into a test trial."""
-    import pandas as pd
-
-    text = column.astype(object).where(column.notna(), "").astype(str).str.strip().str.lower()
-    known = text.isin(PRACTICE_TRUE + PRACTICE_FALSE)
-    if not known.all():
-        bad = [(i, column[i]) for i in column.index[~known]]
-        shown = ", ".join(f"CSV line {i}: {v!r}" for i, v in bad[:5]) + (
-            f" … ({len(bad)} rows in all)" if len(bad) > 5 else "")
-        raise AnalysisError(f"{path}: column 'practice' must be true or false (true/false, yes/no, y/n, t/f, "
-                            f"1/0, or blank for a test trial), got {shown}")
-    return pd.Series(text.isin(PRACTICE_TRUE).to_numpy(), index=column.index)
-
-
-def check_no_practice_rows(data, path: str, used: list[str]) -> None:
-    """Refuse practice trials in the data (e.g. ``analyze``'s ``responses_tidy.csv``): their levels (BODY =
-    Prac) would enter the ANOVA as one more level of a factor. A ``practice`` column the user analyses as
-    a factor or measure is theirs to use."""
-    if "practice" not in data or "practice" in used:
-        return
-    import pandas as pd
-
-    # the cells as written: pandas would read "nan", "NA" or "null" as a blank (test) cell
-    raw = pd.read_csv(path, usecols=["practice"], dtype=str, keep_default_na=False)["practice"]
-    raw.index = data.index
-    flags = practice_flags(raw, path)
-    if not flags.any():
-        return
-    lines = [str(i) for i in data.index[flags]]
-    shown = ", ".join(lines[:5]) + (f" … ({len(lines)} rows in all)" if len(lines) > 5 else "")
-    raise AnalysisError(f"{path}: {len(lines)} of {len(data)} rows are practice trials (column 'practice' is true "
-                        f"on CSV lines {shown}); the ANOVA would count their levels as conditions. Analyse the "
-                        f"report's cell_values.csv (test trials only, one value per participant and cell) or "
-                        f"drop the practice rows first")
-
-
-def _write(path: str, text: str) -> None:
-    target = Path(path)
-    if target.parent and not target.parent.exists():
-        target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, target)
-
-
 def run_anova(args: argparse.Namespace) -> int:
     from analysis.anova import anova
-    from analysis.io_files import check_output_file
+    from analysis.anova_data import read_anova_csv
+    from analysis.io_files import atomic_write_text, check_output_file
     from analysis.posthoc import tukey_all
     from analysis.tables import render
 
@@ -172,22 +93,21 @@ def run_anova(args: argparse.Namespace) -> int:
         if path:
             check_output_file(path, option, [args.data])
     abbreviations = parse_abbreviations(args.abbrev)
-    data = read_csv(args.data)
-    check_no_practice_rows(data, args.data, [args.dv, args.subject, *args.within, *args.between])
+    data = read_anova_csv(args.data, used=[args.dv, args.subject, *args.within, *args.between])
     try:
         table = anova(data, dv=args.dv, subject=args.subject, within=args.within, between=args.between,
                       alpha=args.alpha)
     except AnalysisError as exc:
-        raise AnalysisError(f"{args.data}: {str(exc).replace('at row index', 'on CSV line')}") from None
+        raise AnalysisError(f"{args.data}: {exc}") from None
     check_abbreviations(abbreviations, data, [*args.within, *args.between])
     if args.posthoc == "tukey":
         effects = list(table.effects.index) if args.all else table.significant(correction=args.correction)
         tukey_all(table, effects=effects, abbreviations=abbreviations)
     text = render(table, args.format, all_rows=args.all, correction=args.correction)
     if args.out:
-        _write(args.out, text)
+        atomic_write_text(args.out, text)
     else:
         sys.stdout.write(text)
     if args.json:
-        _write(args.json, table.to_json() + "\n")
+        atomic_write_text(args.json, table.to_json() + "\n")
     return 0

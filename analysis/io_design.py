@@ -5,7 +5,7 @@ levels, the response scale, the dependent measure, the stimuli and their left/ri
 from these files. :func:`load_design` returns one :class:`DesignInfo`.
 
 >>> from analysis.io_design import load_design            # doctest: +SKIP
->>> d = load_design("demo_output/exp1/design")             # doctest: +SKIP
+>>> d = load_design("demo_output/exp1_shape_motion")       # doctest: +SKIP
 >>> d.between, d.within, d.response_type                   # doctest: +SKIP
 (['SEX'], ['GAIT', 'BODY', 'MOTION'], 'likert')
 """
@@ -19,6 +19,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.errors import AnalysisError
+from analysis.practice import practice_flags
 
 # the measures each response type can give, its default first: a rating has no chosen level, a choice no
 # rating or ranking
@@ -245,7 +246,7 @@ def _normalise_conditions(conditions: pd.DataFrame, factors: list[FactorInfo], w
     """Levels as text, ``practice`` as bool; every non-practice stimulus carries its factor levels."""
     out = conditions.copy()
     out["stimulus_id"] = out["stimulus_id"].astype(str)
-    out["practice"] = _as_bool(out["practice"]) if "practice" in out else False
+    out["practice"] = practice_flags(out["practice"], where, line_offset=2) if "practice" in out else False
     for f in factors:
         if f.name in out:
             out[f.name] = out[f.name].astype("string").fillna("").astype(str)
@@ -253,10 +254,6 @@ def _normalise_conditions(conditions: pd.DataFrame, factors: list[FactorInfo], w
         dup = out.loc[out["stimulus_id"].duplicated(), "stimulus_id"].iloc[0]
         raise AnalysisError(f"{where}: stimulus_id {dup!r} appears twice")
     return out
-
-
-def _as_bool(series: pd.Series) -> pd.Series:
-    return series.astype(str).str.strip().str.lower().isin(["true", "1", "yes"])
 
 
 def _read_json(path: Path) -> dict:

@@ -124,11 +124,7 @@ def _anova_rejections(design, model, plan, rng, sims, alpha, progress, correctio
     for size in _chunks(sims, progress, f"N={len(plan.groups)}"):
         Y = measure_arrays(design, plan.test, draw(design, model, plan, rng, sims=size))
         result = anova_many(Y, compiled, alpha=alpha, sphericity=correction != "none")
-        p = result.p
-        if correction != "none":  # effects with 1 df have no correction (NaN): keep their p
-            corrected = result.arrays[f"p_{correction}"]
-            p = np.where(np.isnan(corrected), p, corrected)
-        hits = (np.nan_to_num(p, nan=1.0) < alpha).sum(axis=0)
+        hits = result.rejections(alpha, correction).to_numpy()
         names = result.effects
         counts = hits if counts is None else counts + hits
     keep = informative_effects(design, names)

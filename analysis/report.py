@@ -9,8 +9,10 @@ data).
 Everything is written into a staging folder and moved into place at the end, so an error leaves no
 partial report.
 
->>> analyze("design_dir", "responses.csv", "report_dir")      # doctest: +SKIP
-{'imported_rows': 16, ...}
+>>> summary = analyze("demo_output/exp1_shape_motion",
+...                   "demo_output/exp1_shape_motion/results/responses.csv", "report")   # doctest: +SKIP
+>>> sorted(summary), summary["import"]["participants"]                                    # doctest: +SKIP
+(['design', 'import', 'sections'], 16)
 """
 
 from __future__ import annotations

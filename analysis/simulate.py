@@ -21,6 +21,7 @@ import pandas as pd
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo, arrangement_of
 from analysis.model_spec import GenerativeModel
+from analysis.practice import practice_flags
 
 
 @dataclass
@@ -71,9 +72,11 @@ def _design_trials(design: DesignInfo) -> pd.DataFrame:
     for column in ("practice", "trial", "repetition"):
         if column not in trials:
             raise AnalysisError(f"{where}: column {column!r} is missing; simulation needs it")
-    kind = trials["kind"] if "kind" in trials else np.where(_as_bool(trials["practice"]), "practice", "test")
-    trials = trials[pd.Series(kind, index=trials.index) != "familiarization"]
-    trials["practice"] = _as_bool(trials["practice"])
+    practice = practice_flags(trials["practice"], where, line_offset=2)
+    kind = trials["kind"] if "kind" in trials else np.where(practice, "practice", "test")
+    keep = pd.Series(kind, index=trials.index) != "familiarization"
+    trials = trials[keep]
+    trials["practice"] = practice[keep]
     for column in ("participant", "trial", "repetition"):
         trials[column] = _integers(trials[column], column, where)
     return trials
@@ -176,10 +179,6 @@ def _integers(column: pd.Series, name: str, where) -> pd.Series:
         row = int(np.flatnonzero(bad.to_numpy())[0])
         raise AnalysisError(f"{where}: row {column.index[row] + 2}: {name} {column.iloc[row]!r} is not a whole number")
     return numbers.astype(int)
-
-
-def _as_bool(series: pd.Series) -> pd.Series:
-    return series.astype(str).str.strip().str.lower().isin(["true", "1", "yes"])
 
 
 # -- the linear predictor -------------------------------------------------------------------------

@@ -504,3 +504,76 @@ def test_anova_practice_column_false_spellings_and_blank_are_test_rows(anova_csv
     code, out, _ = run_cli("anova", anova_csv, "--dv", "rating", "--subject", "subject", "--within", "GAIT", "BODY",
                            "--all")
     assert code == 0 and "| BODY |" in out
+
+
+# -- 12. one reader of the practice column (anova, load_design, simulate) -----------------------------------------
+
+def _spell_practice(path: Path, spelling: dict) -> Path:
+    """Rewrite the ``practice`` cells of a design CSV through ``spelling`` (e.g. {"1": "1.0", "0": "0.0"})."""
+    def edit(rows):
+        i = rows[0].index("practice")
+        for r in rows[1:]:
+            r[i] = spelling.get(r[i], r[i])
+    return rewrite_csv(path, edit)
+
+
+def test_practice_written_as_1_0_is_practice_for_the_design_and_for_simulate(designs, tmp_path):
+    """`anova` read `1.0` as practice, load_design and simulate read only true/1/yes: a practice stimulus written
+    `1.0` (a spreadsheet's export) became a test condition of the analysis and its trials test trials."""
+    folder = shutil.copytree(designs["exp1_shape_motion"], tmp_path / "design")
+    for name in ("conditions.csv", "trials.csv"):
+        _spell_practice(folder / name, {"1": "1.0", "0": "0.0"})
+    original, design = load_design(designs["exp1_shape_motion"]), load_design(folder)
+    assert original.conditions["practice"].any()
+    assert design.conditions["practice"].tolist() == original.conditions["practice"].tolist()
+    assert len(design.test_conditions) == len(original.test_conditions)
+    simulated = simulate_responses(design, load_model(None, design), 4, seed=2)
+    pd.testing.assert_frame_equal(simulated, simulate_responses(original, load_model(None, original), 4, seed=2))
+
+
+@pytest.mark.parametrize("name, command", [("conditions.csv", "analyze"), ("trials.csv", "simulate")])
+def test_design_practice_value_that_cannot_be_read_is_refused(designs, run_cli, tmp_path, name, command):
+    """A `maybe` in the practice column used to be a test trial without a word."""
+    folder = shutil.copytree(designs["exp1_shape_motion"], tmp_path / "design")
+
+    def edit(rows):
+        rows[3][rows[0].index("practice")] = "maybe"   # CSV line 4
+    rewrite_csv(folder / name, edit)
+    if command == "analyze":
+        answers = responses(designs["exp1_shape_motion"], tmp_path / "r.csv", "long")
+        args = ["analyze", folder, "--responses", answers, "--out", tmp_path / "out"]
+    else:
+        args = ["simulate", folder, "--participants", "4", "--seed", "1", "--out", tmp_path / "out"]
+    code, _, err = run_cli(*args)
+    assert code == 2 and "Traceback" not in err and not (tmp_path / "out").exists()
+    assert says(err, f"{name}: column 'practice' must be true or false", "CSV line 4: 'maybe'")
+
+
+def test_anova_csv_is_read_once_with_practice_cells_as_written_and_missing_values_as_missing(anova_csv, tmp_path):
+    """read_anova_csv reads the practice cells as written (`nan` is refused, not a blank) in the same pass in
+    which the other columns keep pandas' missing values (`NA` in the DV is missing); the library's messages
+    name CSV lines itself."""
+    from analysis.anova import anova
+    from analysis.anova_data import read_anova_csv
+
+    lines = anova_csv.read_text().splitlines()
+    rows = [line + ",0" for line in lines[1:]]
+    rows[4] = rows[4].rsplit(",", 2)[0] + ",NA,0"   # CSV line 6
+    anova_csv.write_text("\n".join([lines[0] + ",practice", *rows]) + "\n")
+    data = read_anova_csv(anova_csv, used=["rating", "subject", "GAIT", "BODY"])
+    assert data.loc[6, "rating"] != data.loc[6, "rating"] and data.loc[7, "practice"] == "0"
+    with pytest.raises(AnalysisError, match=r"column 'rating' has 1 missing value\(s\).* on CSV line 6;"):
+        anova(data, dv="rating", subject="subject", within=["GAIT", "BODY"])
+    anova_csv.write_text(anova_csv.read_text().replace(",NA,0", ",3,nan"))
+    with pytest.raises(AnalysisError, match="d.csv: column 'practice' must be true or false.*CSV line 6: 'nan'"):
+        read_anova_csv(anova_csv, used=["rating", "subject", "GAIT", "BODY"])
+    assert read_anova_csv(anova_csv, used=["practice"]).loc[6, "practice"] != "nan"   # the user's column: pandas'
+
+
+@pytest.mark.parametrize("module", ["analysis.practice", "analysis.io_files", "analysis.io_design", "analysis.report",
+                                    "analysis.simulate", "analysis.power", "analysis.measures"])
+def test_docstring_examples_run(module):
+    import doctest
+    import importlib
+    result = doctest.testmod(importlib.import_module(module))
+    assert result.failed == 0

@@ -107,3 +107,19 @@ def test_sphericity_violation_gg_and_hf_restore_alpha():
     assert res.rejection_rate(alpha, "gg")["hour"] <= alpha + 4 * se
     assert res.rejection_rate(alpha, "hf")["hour"] <= alpha + 4 * se
     assert np.nanmean(res.eps_gg) < 0.7
+
+
+def test_rejections_count_what_rejection_rate_shares():
+    """power counts rejections through ManyResult.rejections; rejection_rate is the same count per data set.
+    A 1-df effect keeps its uncorrected p under gg/hf; a NaN p is no rejection."""
+    design = Design.make(within={"A": 2, "B": 3}, n_subjects=10)
+    Y = np.random.default_rng(3).normal(size=(200, 10, 6)) + np.array([0, 0, 0, 0.8, 0.8, 0.8])
+    res = anova_many(Y, design)
+    for correction in ("none", "gg", "hf"):
+        key = "p" if correction == "none" else f"p_{correction}"
+        p = np.where(np.isnan(res.arrays[key]), res.p, res.arrays[key])
+        counts = res.rejections(0.05, correction)
+        assert counts.tolist() == (p < 0.05).sum(axis=0).tolist() and counts["A"] > 0
+        assert np.allclose(res.rejection_rate(0.05, correction), counts / 200)
+    res.arrays["p"][:5] = np.nan
+    assert (res.rejections(1.0) == 195).all()

@@ -60,7 +60,7 @@ def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int]
     for row in rows:
         if row not in imported and row not in excluded:
             excluded[row] = Exclusion(row, "", "no answers", "the row answers no stimulus of the design")
-    table = _table(scored, design, stimuli, trialwise)
+    table = _table(scored, design, stimuli)
     listed = sorted(excluded.values(), key=lambda e: e.row) + column_notes
     frame = pd.DataFrame([[e.row, e.participant, e.reason, e.detail, e.column] for e in listed],
                          columns=EXCLUSION_COLUMNS).astype({"row": "Int64"})
@@ -144,13 +144,33 @@ def _outside_detail(answers: list[Answer], repetitions: int) -> str:
 
 
 def _score(a: Answer, design: DesignInfo) -> dict:
+    """The answer's score; what a choice value means is fixed by its source (``a.reading``), not guessed."""
     if design.response_type == "likert":
-        return {"rating": score_likert(a.value, design.labels, design.k)}
-    arrangement = design.arrangement(a.stimulus_id)
-    if design.response_type == "afc":
-        chosen, position = score_choice(a.value, arrangement, design.position_labels)
-        return {"chosen": chosen, "position": position}
-    return {"ranking": ">".join(score_ranking(a.ranks, a.value, arrangement, design.position_labels))}
+        score = {"rating": score_likert(a.value, design.labels, design.k)}
+    elif design.response_type == "afc":
+        arrangement = design.arrangement(a.stimulus_id)
+        chosen, position = score_choice(a.value, arrangement, design.position_labels, a.reading)
+        score = {"chosen": chosen, "position": position}
+    else:
+        arrangement = design.arrangement(a.stimulus_id)
+        return {"ranking": ">".join(score_ranking(a.ranks, a.value, arrangement, design.position_labels,
+                                                  a.reading))}
+    check_restated(a, score, design)
+    return score
+
+
+def check_restated(a: Answer, score: dict, design: DesignInfo) -> None:
+    """jsPsych's ``chosen`` / ``rating`` columns restate the answer; a row where they disagree with the score of
+    its ``response`` is an error (the file and the design disagree about what was shown where)."""
+    for column, value in a.restated.items():
+        if column not in score:
+            continue
+        if str(score[column]).strip().casefold() != value.strip().casefold():
+            where = (f" (positions {'|'.join(design.arrangement(a.stimulus_id))} in conditions.csv)"
+                     if column == "chosen" else "")
+            raise AnalysisError(f"row {a.row}: column {column!r} is {value!r}, but the answer {a.column} = {a.value!r} "
+                                f"of participant {a.participant!r} to stimulus {a.stimulus_id} is {column} "
+                                f"{score[column]!r}{where}; the file and the design disagree")
 
 
 def _check_groups(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
@@ -226,7 +246,7 @@ def _check_cells(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
     return scored
 
 
-def _table(scored, design: DesignInfo, stimuli: pd.DataFrame, trialwise: bool) -> pd.DataFrame:
+def _table(scored, design: DesignInfo, stimuli: pd.DataFrame) -> pd.DataFrame:
     factor_cols = [f.name for f in design.factors if f.role != "alternatives"]
     records = []
     for a, score in scored:
