@@ -12,7 +12,11 @@
   of 2AFC choices. The outcome is "chose the first alternatives level" (e.g. NoCOM): the intercept tests
   the alternatives main effect (METHOD) and each term X tests X × METHOD.
 
-Every function returns a DataFrame with columns ``model, term, df, chi2, p, note``.
+Every function returns a DataFrame with columns ``model, term, df, chi2, p, note``. A model that cannot be
+estimated from the data (e.g. ratings perfectly separated by the factors, so the information matrix has no
+inverse and there are no standard errors) is not an error: :func:`additional_models` gives it one row with
+term ``not computed``, empty df/chi2/p and the reason in ``note`` (``not computed: …``), so the report is still
+written and says why — as the ANOVA section does when the measure has no variance.
 """
 
 from __future__ import annotations
@@ -26,6 +30,15 @@ import pandas as pd
 from analysis.io_design import DesignInfo
 
 FACTOR_IN_PARAM = re.compile(r"C\((\w+), Sum\)")
+NOT_COMPUTED = "not computed"
+MODEL_NAMES = {"mixed_model": "linear mixed model (MixedLM, REML)",
+               "ordinal_model": "ordinal (cumulative logit) model",
+               "choice_mixed": "logistic mixed model (variational Bayes, approximate)",
+               "choice_gee": "logistic GEE (exchangeable, robust SE)"}
+
+
+class ModelNotComputed(ValueError):
+    """The data do not allow the model to be estimated; the message says why (shown in the report)."""
 
 
 def _formula_rhs(factors: list[str]) -> str:
@@ -69,8 +82,12 @@ def mixed_model(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
         warnings.simplefilter("ignore")  # convergence chatter; convergence is reported in the note
         fit = smf.mixedlm(f"rating ~ {_formula_rhs(factors)}", frame, groups=frame["participant"]).fit(
             reml=True, method=["bfgs", "powell"])
+    spread = float(frame["rating"].var()) if len(frame) > 1 else 0.0
+    if not np.isfinite(fit.scale) or fit.scale <= 1e-10 * max(spread, 1e-300):
+        raise ModelNotComputed(f"the residual variance is {fit.scale:.3g}: the factors and participants account for "
+                               f"every rating exactly, so the Wald tests would divide by a zero standard error")
     fe = fit.fe_params
-    table = wald_terms(fe, fit.cov_params().loc[fe.index, fe.index], "linear mixed model (MixedLM, REML)")
+    table = wald_terms(fe, _covariance(fit, fe.index), MODEL_NAMES["mixed_model"])
     table["note"] = (f"random intercept SD {np.sqrt(float(fit.cov_re.iloc[0, 0])):.3f}, residual SD "
                      f"{np.sqrt(fit.scale):.3f}, converged {bool(fit.converged)}, n = {len(frame)} answers")
     return table
@@ -89,8 +106,8 @@ def ordinal_model(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
         warnings.simplefilter("ignore")
         fit = OrderedModel(y, X, distr="logit").fit(method="bfgs", disp=False, maxiter=5000)
     params = fit.params[X.columns]
-    cov = fit.cov_params().loc[X.columns, X.columns]
-    table = wald_terms(params, cov, "ordinal (cumulative logit) model")
+    cov = _covariance(fit, X.columns)
+    table = wald_terms(params, cov, MODEL_NAMES["ordinal_model"])
     table["note"] = (f"fixed effects only (no participant random effect); converged "
                      f"{bool(fit.mle_retvals.get('converged', False))}, n = {len(frame)} answers")
     return table
@@ -124,7 +141,7 @@ def choice_gee(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
         warnings.simplefilter("ignore")
         fit = smf.gee(formula, "participant", frame, family=sm.families.Binomial(),
                       cov_struct=sm.cov_struct.Exchangeable()).fit()
-    table = _choice_terms(fit.params, fit.cov_params(), "logistic GEE (exchangeable, robust SE)", design)
+    table = _choice_terms(fit.params, _covariance(fit, fit.params.index), MODEL_NAMES["choice_gee"], design)
     odds = float(np.exp(fit.params["Intercept"]))
     table["note"] = (f"outcome: chose {design.alternatives.levels[0]}; odds {odds:.2f} at the grand mean "
                      f"(P = {odds / (1 + odds):.3f}); n = {len(frame)} answers")
@@ -145,16 +162,73 @@ def choice_mixed(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     names = model.exog_names
     cov = pd.DataFrame(np.diag(np.asarray(fit.fe_sd) ** 2), index=names, columns=names)
     table = _choice_terms(pd.Series(fit.fe_mean, index=names), cov,
-                          "logistic mixed model (variational Bayes, approximate)", design)
+                          MODEL_NAMES["choice_mixed"], design)
     table["note"] = (f"outcome: chose {design.alternatives.levels[0]}; participant random-intercept SD "
                      f"{float(np.exp(fit.vcp_mean[0])):.3f} (log-odds); n = {len(frame)} answers")
     return table
 
 
+def _covariance(fit, names) -> pd.DataFrame:
+    """The estimates' covariance, or :class:`ModelNotComputed` when the fit has none (a singular information
+    matrix: the factors separate the responses perfectly, or a parameter is not identified)."""
+    try:
+        cov = fit.cov_params()
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise ModelNotComputed(f"the fit has no covariance matrix of its estimates ({exc}), so there are no "
+                               f"standard errors for Wald tests") from None
+    cov = cov.loc[list(names), list(names)]
+    if not np.isfinite(cov.to_numpy()).all():
+        raise ModelNotComputed("the covariance matrix of the estimates is not finite, so there are no standard "
+                               "errors for Wald tests")
+    return cov
+
+
+def _separation_hint(data: pd.DataFrame, design: DesignInfo, column: str) -> str:
+    """``; every design cell has a single rating …`` when each cell's answers are all the same (perfect separation)."""
+    frame = data[~data["practice"].astype(bool)]
+    factors = [f for f in design.between + design.within if f in frame]
+    if column not in frame or not factors or frame.empty:
+        return ""
+    if (frame.groupby(factors, observed=True)[column].nunique() == 1).all():
+        return (f"; every design cell ({' × '.join(factors)}) has a single {column} across all participants: the "
+                f"factors predict every answer exactly")
+    return ""
+
+
+def not_computed_row(model: str, reason: str) -> pd.DataFrame:
+    """The one row of a model that could not be estimated: term ``not computed``, reason in ``note``."""
+    return pd.DataFrame([{"model": model, "term": NOT_COMPUTED, "df": np.nan, "chi2": np.nan, "p": np.nan,
+                          "note": f"{NOT_COMPUTED}: {reason}"}])
+
+
+def not_computed_models(table: pd.DataFrame) -> dict[str, str]:
+    """Model → reason, for the models of an :func:`additional_models` table that were not computed."""
+    rows = table[table["term"] == NOT_COMPUTED]
+    return {m: n.removeprefix(f"{NOT_COMPUTED}: ") for m, n in zip(rows["model"], rows["note"])}
+
+
+def _guarded(function, data: pd.DataFrame, design: DesignInfo, column: str) -> pd.DataFrame:
+    """Run one model; if the data do not allow it to be estimated, its not-computed row with the reason."""
+    from statsmodels.tools.sm_exceptions import PerfectSeparationError
+    try:
+        table = function(data, design)
+    except (ModelNotComputed, PerfectSeparationError, np.linalg.LinAlgError, ValueError) as exc:
+        reason = str(exc) if isinstance(exc, ModelNotComputed) else \
+            f"statsmodels could not estimate it ({type(exc).__name__}: {exc})"
+        return not_computed_row(MODEL_NAMES[function.__name__], reason + _separation_hint(data, design, column))
+    if not np.isfinite(table["chi2"].to_numpy(dtype=float)).all():
+        return not_computed_row(MODEL_NAMES[function.__name__], "a Wald statistic is not finite (a zero or "
+                                "undefined standard error)" + _separation_hint(data, design, column))
+    return table
+
+
 def additional_models(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
-    """All additional models that fit the design's response type (empty for rankings/k-AFC votes)."""
+    """All additional models that fit the design's response type (empty for rankings/k-AFC votes); a model
+    the data do not allow to estimate gets one ``not computed`` row with the reason (see the module docstring)."""
     if design.response_type == "likert":
-        return pd.concat([mixed_model(data, design), ordinal_model(data, design)], ignore_index=True)
+        return pd.concat([_guarded(mixed_model, data, design, "rating"),
+                          _guarded(ordinal_model, data, design, "rating")], ignore_index=True)
     if design.response_type == "afc" and len(design.alternatives.levels) == 2:
-        return pd.concat([choice_mixed(data, design), choice_gee(data, design)], ignore_index=True)
+        return pd.concat([_guarded(choice_mixed, data, design, "chosen"),
+                          _guarded(choice_gee, data, design, "chosen")], ignore_index=True)
     return pd.DataFrame(columns=["model", "term", "df", "chi2", "p", "note"])

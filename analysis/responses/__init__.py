@@ -86,14 +86,14 @@ def import_responses(path: str | Path, design: DesignInfo) -> ImportResult:
     raw = read_response_file(path)
     check_protocol(raw, design)
     tags = _tag_index(design)
-    if raw.format.startswith("qualtrics"):
-        answers, exclusions = qualtrics_answers(raw, tags, design.between, design.response_type == "ranking")
-    else:
-        answers, exclusions = trialwise_answers(raw, design.between, design.within)
-    try:
+    try:   # the readers and checks name row and column; the file is known here
+        if raw.format.startswith("qualtrics"):
+            answers, exclusions = qualtrics_answers(raw, tags, design.between, design.response_type == "ranking")
+        else:
+            answers, exclusions = trialwise_answers(raw, design.between, design.within)
         data, excluded = assemble(answers, exclusions, raw.row_numbers, design,
                                   trialwise=not raw.format.startswith("qualtrics"))
-    except AnalysisError as exc:   # the checks name row and column; the file is known here
+    except AnalysisError as exc:
         raise AnalysisError(f"{path}: {exc}") from None
     return ImportResult(Path(path), raw.format, data, excluded, raw.n_rows)
 

@@ -5,6 +5,10 @@ display-order ``*_DO`` columns (they give each participant's presentation order)
 questions (their export tag names a stimulus, optionally with a repetition suffix; rank-order questions
 add ``_1`` … ``_k`` per screen position) and embedded data (anything else, e.g. ``PROLIFIC_PID``).
 A question whose tag names no stimulus is listed as a column exclusion.
+
+A forced-choice value is an answer option of the survey (``scoring.CHOICE``): a number is the option's 1-based
+screen position (the numeric export's recode), text the option's label (a position label, ``Left``/``Right``) —
+never a level name that happens to look like a number (see :mod:`analysis.responses.scoring`).
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+from analysis.errors import AnalysisError
 from analysis.responses.answers import Answer, Exclusion, TagIndex
 from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_column
 
@@ -56,6 +61,13 @@ def classify_columns(raw: RawFile, tags: TagIndex | None, ranking: bool = False)
 
 
 def _match(name: str, tags: TagIndex, ranking: bool) -> tuple[str, int | None, int | None] | None:
+    try:
+        return _match_tag(name, tags, ranking)
+    except AnalysisError as exc:   # several stimuli fit the tag
+        raise AnalysisError(f"column {name!r}: {exc}") from None
+
+
+def _match_tag(name: str, tags: TagIndex, ranking: bool) -> tuple[str, int | None, int | None] | None:
     if ranking:
         m = RANK_POSITION.match(name)
         hit = tags.match(m["base"]) if m else None

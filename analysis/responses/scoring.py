@@ -1,14 +1,31 @@
 """Turn one raw answer into a score on the design's response scale, or say why it is outside the scale.
 
 - Likert: ``1``…``k`` or a label of the protocol's scale (case and spacing ignored) → rating 1…k.
-- k-AFC: an alternatives level (``NoCOM``), a side (``left``/``right``), a position label (``A``…) or a
-  1-based position → the chosen level, through the stimulus's left/right (or positions) placement.
+- k-AFC: the chosen screen position, or the chosen level → the chosen level, through the stimulus's
+  left/right (or positions) placement.
 - Ranking: ranks per position (Qualtrics rank order) or an order ``A>C>B>D`` (best first) → levels best first.
+
+What a forced-choice value means is fixed by where it comes from (its *reading*), never guessed from the
+value — a level may well be called ``3`` or ``B`` (point-light strengths ``3``, ``12``, ``35`` on positions
+``A``–``C``):
+
+- ``CHOICE`` — an answer option of the survey (Qualtrics values, jsPsych ``response``): a number is the
+  option's 1-based screen position (Qualtrics numeric export = the choice's recode; jsPsych's 0-based button
+  index + 1), text is the option's label: a position label (``A``…) or, for two clips, ``left``/``right``.
+  A level name is accepted only where it cannot be read as a position (it is no position label, side or
+  number); a value that reads as two different positions (a position label that is a number other than its
+  own position) is outside the scale.
+- ``LEVEL`` — the long format's ``response``: the chosen level's name. A position label or side is read as a
+  position only if no level is called like one, and a number only if no level name is a number.
 
 >>> score_likert("Very Consistent", ["Very Inconsistent", "Inconsistent", "Neutral", "Consistent", "Very Consistent"])
 5
 >>> score_choice("right", ["NoCOM", "COM"], ["left", "right"])
 ('COM', 2)
+>>> score_choice("3", ["12", "35", "3"], ["A", "B", "C"], CHOICE), score_choice("3", ["12", "35", "3"], ["A", "B", "C"], LEVEL)
+(('3', 3), ('3', 3))
+>>> score_choice("1", ["12", "35", "3"], ["A", "B", "C"], CHOICE)
+('12', 1)
 >>> score_ranking(None, "B>A>C", ["x", "y", "z"], ["A", "B", "C"])
 ['y', 'x', 'z']
 """
@@ -16,6 +33,10 @@
 from __future__ import annotations
 
 import re
+
+CHOICE = "choice"   # a survey's answer option: number = 1-based position, text = its position label
+LEVEL = "level"     # the long format: the chosen level's name
+READINGS = (CHOICE, LEVEL)
 
 
 class OutsideScale(ValueError):
@@ -48,28 +69,85 @@ def score_likert(value: str, labels: list[str], k: int | None = None) -> int:
     raise OutsideScale(f"{value!r} is neither 1…{k} nor one of the labels {labels}")
 
 
-def _position(token: str, arrangement: list[str], position_labels: list[str]) -> int | None:
-    """1-based screen position named by a level, a side/position label or a number."""
+def screen_labels(position_labels: list[str], k: int) -> list[str]:
+    """What the k screen positions are called: the design's position labels, else ``A``, ``B``, … (as the
+    survey exporters name them); for two clips ``left``/``right`` are accepted as well."""
+    labels = list(position_labels) if len(position_labels) == k else [chr(ord("A") + i) for i in range(k)]
+    return labels
+
+
+def _label_positions(k: int, position_labels: list[str]) -> dict[str, set[int]]:
+    """Normalised position label or side → the 1-based position(s) it names."""
+    out: dict[str, set[int]] = {}
+    names = [screen_labels(position_labels, k)] + ([["left", "right"]] if k == 2 else [])
+    for labels in names:
+        for i, label in enumerate(labels):
+            out.setdefault(_norm(label), set()).add(i + 1)
+    return out
+
+
+def _position(token: str, arrangement: list[str], position_labels: list[str], reading: str) -> int:
+    """1-based screen position an answer names, read as ``reading`` says (see the module docstring)."""
+    if reading not in READINGS:
+        raise ValueError(f"unknown reading {reading!r}")
+    k = len(arrangement)
     text = _norm(token)
-    for names in (arrangement, position_labels, ["left", "right"] if len(arrangement) == 2 else []):
-        lowered = [_norm(n) for n in names]
-        if text in lowered:
-            return lowered.index(text) + 1
+    levels = [_norm(level) for level in arrangement]
+    labels = _label_positions(k, position_labels)
     number = _integer(token)
-    return number if number is not None and 1 <= number <= len(arrangement) else None
+    as_level = levels.index(text) + 1 if text in levels else None
+    as_label = labels.get(text, set())
+    if len(as_label) > 1:
+        raise OutsideScale(f"{token!r} names several screen positions {sorted(as_label)}")
+    as_label = next(iter(as_label), None)
+    as_number = number if number is not None and 1 <= number <= k else None
+    shown = screen_labels(position_labels, k)
+    if reading == LEVEL:
+        if as_level is not None:
+            return as_level
+        level_like_label = any(lv in labels for lv in levels)
+        level_like_number = any(_integer(lv) is not None for lv in arrangement)
+        if as_label is not None and not level_like_label:
+            return as_label
+        if as_number is not None and not level_like_number:
+            return as_number
+        allowed = ["a level name " + str(arrangement)]
+        if not level_like_label:
+            allowed.append(f"a position label {shown}" + (" or left/right" if k == 2 else ""))
+        if not level_like_number:
+            allowed.append(f"a 1-based position 1…{k}")
+        note = ""
+        if level_like_number and number is not None:
+            note = " (the long format reads numbers as level names here, as some levels are numbers)"
+        elif level_like_label and as_label is not None:
+            note = " (the long format reads it as a level name here, as some levels are named like positions)"
+        raise OutsideScale(f"{token!r} is not {' or '.join(allowed)}{note}")
+    # CHOICE: number → position; text → position label / side; a level name only where it is neither
+    if number is not None:
+        if as_number is None:
+            raise OutsideScale(f"{token!r} is not a screen position 1…{k} (a number in a survey export is the "
+                               f"answer option's position, not a level)")
+        if as_label is not None and as_label != as_number:
+            raise OutsideScale(f"{token!r} is ambiguous: position {as_number}, but also the label of position "
+                               f"{as_label} ({shown})")
+        return as_number
+    if as_label is not None:
+        return as_label
+    if as_level is not None:
+        return as_level
+    raise OutsideScale(f"{token!r} names none of the {k} screen positions (labels {shown}"
+                       f"{', left/right' if k == 2 else ''} or 1…{k}) nor one of the levels {arrangement}")
 
 
-def score_choice(value: str, arrangement: list[str], position_labels: list[str]) -> tuple[str, int]:
+def score_choice(value: str, arrangement: list[str], position_labels: list[str],
+                 reading: str = CHOICE) -> tuple[str, int]:
     """(chosen level, 1-based position) of a forced-choice answer."""
-    pos = _position(value, arrangement, position_labels)
-    if pos is None:
-        raise OutsideScale(f"{value!r} names none of the {len(arrangement)} alternatives {arrangement} "
-                           f"(nor a position {position_labels or list(range(1, len(arrangement) + 1))})")
+    pos = _position(value, arrangement, position_labels, reading)
     return arrangement[pos - 1], pos
 
 
 def score_ranking(ranks: list[str] | None, order: str, arrangement: list[str],
-                  position_labels: list[str]) -> list[str]:
+                  position_labels: list[str], reading: str = CHOICE) -> list[str]:
     """Alternatives levels best first, from ranks per position or from an order string."""
     k = len(arrangement)
     if ranks is not None:
@@ -78,8 +156,13 @@ def score_ranking(ranks: list[str] | None, order: str, arrangement: list[str],
             raise OutsideScale(f"ranks {ranks} are not a permutation of 1…{k}")
         return [arrangement[numbers.index(r)] for r in range(1, k + 1)]
     tokens = [t for t in re.split(r"\s*[>,;|]\s*", str(order).strip()) if t]
-    positions = [_position(t, arrangement, position_labels) for t in tokens]
-    if len(tokens) != k or None in positions or len(set(positions)) != k:
+    if len(tokens) != k:
         raise OutsideScale(f"{order!r} is not an order of all {k} alternatives (e.g. "
-                           f"{'>'.join(position_labels or arrangement)})")
+                           f"{'>'.join(screen_labels(position_labels, k) if reading == CHOICE else arrangement)})")
+    try:
+        positions = [_position(t, arrangement, position_labels, reading) for t in tokens]
+    except OutsideScale as exc:
+        raise OutsideScale(f"{order!r} is not an order of all {k} alternatives: {exc}") from None
+    if len(set(positions)) != k:
+        raise OutsideScale(f"{order!r} names a position twice; expected each of the {k} alternatives once")
     return [arrangement[p - 1] for p in positions]
