@@ -180,6 +180,12 @@ def _covariance(fit, names) -> pd.DataFrame:
     if not np.isfinite(cov.to_numpy()).all():
         raise ModelNotComputed("the covariance matrix of the estimates is not finite, so there are no standard "
                                "errors for Wald tests")
+    # A covariance matrix has no negative eigenvalue. Under separation (a cell whose answers all go one
+    # way) the robust sandwich of a GEE can have large ones, and its Wald χ² come out negative (p = 1).
+    eig = np.linalg.eigvalsh((cov.to_numpy() + cov.to_numpy().T) / 2)
+    if eig.min() < -1e-8 * max(abs(eig).max(), 1e-300):
+        raise ModelNotComputed("the covariance matrix of the estimates is not positive semi-definite "
+                               f"(eigenvalues {eig.min():.3g} to {eig.max():.3g}), so its Wald tests are meaningless")
     return cov
 
 
@@ -189,9 +195,14 @@ def _separation_hint(data: pd.DataFrame, design: DesignInfo, column: str) -> str
     factors = [f for f in design.between + design.within if f in frame]
     if column not in frame or not factors or frame.empty:
         return ""
-    if (frame.groupby(factors, observed=True)[column].nunique() == 1).all():
+    single = frame.groupby(factors, observed=True)[column].nunique() == 1
+    if single.all():
         return (f"; every design cell ({' × '.join(factors)}) has a single {column} across all participants: the "
                 f"factors predict every answer exactly")
+    if single.any():
+        cells = ["/".join(map(str, np.atleast_1d(cell))) for cell in single[single].index[:3]]
+        return (f"; {int(single.sum())} design cell(s) ({' × '.join(factors)}) have a single {column} across all "
+                f"participants (e.g. {', '.join(cells)}): their estimates do not exist")
     return ""
 
 
@@ -226,9 +237,10 @@ def additional_models(data: pd.DataFrame, design: DesignInfo) -> pd.DataFrame:
     """All additional models that fit the design's response type (empty for rankings/k-AFC votes); a model
     the data do not allow to estimate gets one ``not computed`` row with the reason (see the module docstring)."""
     if design.response_type == "likert":
-        return pd.concat([_guarded(mixed_model, data, design, "rating"),
-                          _guarded(ordinal_model, data, design, "rating")], ignore_index=True)
-    if design.response_type == "afc" and len(design.alternatives.levels) == 2:
-        return pd.concat([_guarded(choice_mixed, data, design, "chosen"),
-                          _guarded(choice_gee, data, design, "chosen")], ignore_index=True)
-    return pd.DataFrame(columns=["model", "term", "df", "chi2", "p", "note"])
+        parts = [_guarded(mixed_model, data, design, "rating"), _guarded(ordinal_model, data, design, "rating")]
+    elif design.response_type == "afc" and len(design.alternatives.levels) == 2:
+        parts = [_guarded(choice_mixed, data, design, "chosen"), _guarded(choice_gee, data, design, "chosen")]
+    else:
+        return pd.DataFrame(columns=["model", "term", "df", "chi2", "p", "note"])
+    table = pd.concat(parts, ignore_index=True)
+    return table.astype({"df": "Int64"})   # whole degrees of freedom, blank where not computed

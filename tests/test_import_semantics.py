@@ -364,6 +364,25 @@ def test_analyze_writes_the_report_when_the_ordinal_model_cannot_be_fitted(rule_
     assert "ordinal (cumulative logit) model — not computed: the fit has no covariance matrix" in html
 
 
+def test_gee_under_separation_is_not_computed_instead_of_negative_chi2(tmp_path):
+    """Exp. 2 with every choice in one cell (walk/F/Hi1) the same: the GEE's robust covariance is indefinite
+    and gave Wald χ² of −40, −280 and −3765 with p = 1; it is now marked not computed, naming the cell."""
+    from analysis.models import additional_models, not_computed_models
+    design = _make_design(tmp_path, ROOT / "protocols" / "exp2_com_vs_average.yaml", 16)
+    frame = pd.read_csv(io.StringIO(export_text(_simulated(design, participants=16, seed=7), design, "long")),
+                        dtype=str, keep_default_na=False)
+    cells = design.conditions.set_index("stimulus_id")
+    one_cell = [(cells.at[s, "GAIT"], cells.at[s, "SEX"], cells.at[s, "BODY"]) == ("walk", "F", "Hi1")
+                for s in frame["stimulus_id"]]
+    frame.loc[one_cell, "response"] = "NoCOM"
+    frame.to_csv(tmp_path / "responses.csv", index=False)
+    table = additional_models(import_responses(tmp_path / "responses.csv", design).data, design)
+    reasons = not_computed_models(table)
+    gee = "logistic GEE (exchangeable, robust SE)"
+    assert gee in reasons and "not positive semi-definite" in reasons[gee] and "walk/F/Hi1" in reasons[gee]
+    assert (table["chi2"].dropna() >= 0).all()
+
+
 # -- F4: tags that differ only in case or punctuation ---------------------------------------------------------
 
 def test_tags_differing_only_in_punctuation_are_not_merged():
