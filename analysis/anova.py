@@ -117,16 +117,26 @@ class AnovaTable:
         return [e for e in self.effects.index if corrected_p(self.effects.loc[e], correction) < a]
 
     def to_records(self) -> list[dict]:
-        """DESIGN.md's ANOVA JSON: one dict per effect; NaN → None; post-hoc pairs and summary when run."""
+        """DESIGN.md's ANOVA JSON: one dict per effect; NaN → None; post-hoc pairs and summary when run.
+
+        Where Tukey ran on an effect whose error term has no variance, its pairs carry q = p = None, the
+        summary is None and ``posthoc_untestable`` (a key present only then) says why.
+
+        JSON has no ∞: an infinite F (and nc), where the effect is real but its error term has no
+        variance, is also None — told apart from an untestable effect (F = 0/0, p None) by p = 0 and
+        power = 1, exactly what the tables print as ``∞``, ``<0.001`` and ``1.00``.
+        """
         out = []
         for name, row in self.effects.iterrows():
             rec = {"effect": name, "factors": list(row["factors"])}
             for c in EFFECT_COLUMNS:
                 v = float(row[c])
-                rec[c] = None if math.isnan(v) else v
+                rec[c] = None if not math.isfinite(v) else v
             ph = self.posthoc.get(name)
             rec["posthoc"] = ph.records() if ph is not None else []
-            rec["summary"] = ph.summary if ph is not None else None
+            rec["summary"] = ph.summary if ph is not None and not ph.untestable else None
+            if ph is not None and ph.untestable:   # Tukey asked for but nothing testable: q, p null, and why
+                rec["posthoc_untestable"] = ph.untestable
             out.append(rec)
         return out
 

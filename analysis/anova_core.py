@@ -295,9 +295,13 @@ class CompiledDesign:
             # effect without METHOD is 0/0) holds only rounding noise: its F is undefined, not huge.
             centred = Y - Y.mean(axis=(1, 2), keepdims=True)
             scale = np.einsum("dnk,dnk->d", centred, centred)[:, None]
-            degenerate = ss + sse <= NO_VARIANCE * scale
+            tol = NO_VARIANCE * scale
+            degenerate = ss + sse <= tol
             F = np.where(degenerate, np.nan, F)
             ss, ms = np.where(degenerate, 0.0, ss), np.where(degenerate, 0.0, ms)
+            # An effect that is real over an error term that is rounding noise (SS, MSE kept as computed):
+            # F = ∞ (so p = 0, power = 1), the rule the tables print — not F = 1e31 made of noise.
+            F = np.where((sse <= tol) & ~degenerate, np.inf, F)
             p = special.fdtrc(df1, df2, F)
             pes = np.where(degenerate, np.nan, ss / (ss + sse))
             ges = ss / (ss + sse_strata.sum(axis=1, keepdims=True))
@@ -308,7 +312,7 @@ class CompiledDesign:
         if power:
             out["power"] = observed_power(F, df1, df2, alpha)
         if sphericity:
-            sph = self.sphericity(T)
+            sph = self.sphericity(T, tol[:, 0])
             gg = sph["eps_gg"][:, self.eff_s]
             hf = sph["eps_hf"][:, self.eff_s]
             with np.errstate(invalid="ignore"):
@@ -324,13 +328,21 @@ class CompiledDesign:
             out = {k: v[0] for k, v in out.items()}
         return out
 
-    def sphericity(self, T: np.ndarray) -> dict:
+    def sphericity(self, T: np.ndarray, tol: np.ndarray | float = 0.0) -> dict:
         """Mauchly W and p, GG and HF ε per stratum (NaN where d = 1). HF is capped at 1 in ``eps_hf``
-        (SPSS/Statistica, and what car/afex use for the corrected p); ``eps_hf_raw`` is uncapped."""
+        (SPSS/Statistica, and what car/afex use for the corrected p); ``eps_hf_raw`` is uncapped.
+
+        All NaN, too, where the stratum's error SSCP is singular beyond what its df allow: fewer than
+        min(d, error df) eigenvalues above ``tol`` (per data set; ``fit`` passes NO_VARIANCE × the data
+        set's total SS). ε and Mauchly of such a matrix are ratios of rounding noise (car: "error SSP
+        matrix singular … corrections not available"). With fewer error df than contrasts (n < d) the
+        SSCP is singular by construction; ε is still reported there (Mauchly is not), as before.
+        """
         D = T.shape[0]
         S = len(self.strata_masks)
         res = {k: np.full((D, S), np.nan) for k in ("eps_gg", "eps_hf", "eps_hf_raw", "mauchly_w", "mauchly_p")}
         n = self.df_error
+        tol = np.broadcast_to(np.asarray(tol, dtype=float), (D,))
         for j, sl in enumerate(self.col_slices):
             d = sl.stop - sl.start
             if d < 2:
@@ -342,13 +354,29 @@ class CompiledDesign:
             with np.errstate(divide="ignore", invalid="ignore"):
                 gg = tr * tr / (d * tr2)
                 hf = ((n + 1) * d * gg - 2) / (d * (n - d * gg))
-                res["eps_gg"][:, j] = gg
-                res["eps_hf_raw"][:, j] = hf
-                res["eps_hf"][:, j] = np.minimum(hf, 1.0)
                 w, pw = mauchly(sscp, tr, n)
-            res["mauchly_w"][:, j] = w
-            res["mauchly_p"][:, j] = pw
+                logdet = np.log(w) + d * np.log(tr / d)   # NaN where det ≤ 0 or n < d
+            singular = self._singular(sscp, tr, logdet, tol, min(d, n))
+            for key, v in (("eps_gg", gg), ("eps_hf_raw", hf), ("eps_hf", np.minimum(hf, 1.0)),
+                           ("mauchly_w", w), ("mauchly_p", pw)):
+                res[key][:, j] = np.where(singular, np.nan, v)
         return res
+
+    @staticmethod
+    def _singular(sscp: np.ndarray, tr: np.ndarray, logdet: np.ndarray, tol: np.ndarray, rank: int) -> np.ndarray:
+        """Per data set: has the (D × d × d, positive semi-definite) SSCP fewer than ``rank`` eigenvalues
+        above ``tol``? Cheap screen first: the smallest eigenvalue is at least det / tr^(d−1), so a
+        matrix passing that bound (``logdet`` from Mauchly's W) needs no eigen-decomposition; ordinary data
+        never reach ``eigvalsh``."""
+        d = sscp.shape[-1]
+        out = tr <= tol  # the whole stratum is rounding noise
+        with np.errstate(divide="ignore", invalid="ignore"):
+            safe = logdet - (d - 1) * np.log(tr) > np.log(tol)   # False where logdet is NaN
+        todo = ~out & ~safe
+        if todo.any():
+            ev = np.linalg.eigvalsh(sscp[todo])
+            out[todo] = (ev > tol[todo, None]).sum(axis=1) < rank
+        return out
 
 
 def mauchly(sscp: np.ndarray, tr: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

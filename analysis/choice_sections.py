@@ -90,7 +90,7 @@ def _vote_tables(counts: pd.DataFrame, tests: list[dict], most: dict, design: De
     return [ResultTable("votes", f"Votes per {alt.name} level (all trials{per_cell}) and the test of equal shares: "
                                  f"χ² goodness of fit where each participant voted once, else Friedman over "
                                  f"participants", frame),
-            ResultTable("most_voted", f"{most['label']} (most votes) chosen more often than 1/{k}, "
+            ResultTable("most_voted", f"{most['label']} (most votes): share against chance 1/{k}, two-sided "
                                       f"{most['test']}", top)]
 
 

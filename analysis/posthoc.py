@@ -6,6 +6,15 @@ means averaged over the within factors not in E), based on n = subjects in the b
 number of averaged within cells. q = |m_i − m_j| / sqrt(MSE_E/2 · (1/n_i + 1/n_j)) (Tukey–Kramer;
 the plain Tukey HSD when n_i = n_j), p = P(Q_{k, df_E} > q) with k = number of cells of E.
 
+An effect whose error term has no variance (error SS 0 up to rounding: the ANOVA's F is 0/0 or ∞) is not
+tested: q and p are NaN, no pair is significant and ``untestable`` says why — a q of 1e16 against an MSE of
+1e-31 is a ratio of rounding noise, not evidence.
+
+For a mixed effect (within and between factors), a pair that differs only in its between-subjects levels
+(``F/L1b`` vs ``M/L1b`` of BODY:SEX) is still tested against the effect's within-subject error, as
+Statistica does; that error holds no between-subject variance, so such a test is anti-conservative next to
+emmeans' pooled error. ``pairs["between_only"]`` marks those pairs (numbers unchanged).
+
 Cell labels list the between factors' levels first, then the within factors', joined by ``/``
 (``F/W``, ``H1b/L2m``), abbreviated through ``abbreviations``. The summary names, for each cell in
 level order, the cells it significantly exceeds: ``"L2b > H2b"``, ``"F/L1b > F/H1b, M/H2b; F/L2b > F/H1b"``.
@@ -35,9 +44,13 @@ class PosthocResult:
         factors: the factors in label order (between first, then within).
         means: DataFrame indexed by cell label: one column per factor (full level names), ``mean``, ``n``.
         pairs: DataFrame, one row per pair (i < j in level order): ``a``, ``b`` (labels), ``diff``
-            (mean a − mean b), ``se``, ``q``, ``p``, ``significant`` (p < alpha).
+            (mean a − mean b), ``se``, ``q``, ``p``, ``significant`` (p < alpha), ``between_only`` (the
+            pair belongs to a mixed effect and differs only in between-subjects levels, yet is tested
+            against the within-subject error of the effect — see the module notes).
         k, df, mse, alpha: number of means, error df and MS of the effect's error term, level.
-        summary: the paper's compact string ("" when no pair differs).
+        summary: the paper's compact string ("" when no pair differs, or when nothing was tested).
+        untestable: "" when the pairs were tested, else why not (the effect's error term has no variance):
+            q, p NaN, nothing significant.
     """
 
     effect: str
@@ -49,11 +62,15 @@ class PosthocResult:
     mse: float
     alpha: float
     summary: str
+    untestable: str = ""
 
     def records(self) -> list[dict]:
-        """DESIGN.md's post-hoc list: ``[{a, b, diff, q, p}]``."""
+        """DESIGN.md's post-hoc list: ``[{a, b, diff, q, p}]`` (q and p None where nothing was tested)."""
+        def num(x):
+            return float(x) if np.isfinite(x) else None
+
         return [
-            {"a": a, "b": b, "diff": float(d), "q": float(q), "p": float(p)}
+            {"a": a, "b": b, "diff": float(d), "q": num(q), "p": num(p)}
             for a, b, d, q, p in self.pairs[["a", "b", "diff", "q", "p"]].itertuples(index=False)
         ]
 
@@ -133,19 +150,30 @@ def tukey(
     i, j = np.triu_indices(k, 1)
     diff = means[i] - means[j]
     se = np.sqrt(mse / 2.0 * (1.0 / nn[i] + 1.0 / nn[j]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = np.abs(diff) / se
-    p = studentized_range_sf(np.nan_to_num(q, nan=0.0, posinf=1e300), k, df)
+    untestable = ""
+    if not np.isfinite(float(row["F"])):   # the engine's verdict: error SS 0 up to rounding (F = 0/0 or ∞)
+        untestable = (f"the error term {row['error']} has no variance (SS 0 up to rounding), so no pair of "
+                      f"{name} can be tested against it")
+        q = p = np.full(len(i), np.nan)
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = np.abs(diff) / se
+        p = studentized_range_sf(np.nan_to_num(q, nan=0.0, posinf=1e300), k, df)
+    n_between = sum(f in table.design.between for f in facs)   # between factors come first in a label
+    mixed = 0 < n_between < len(facs)
+    cell_arr = np.array(cells, dtype=object).reshape(k, len(facs))
+    between_only = (np.all(cell_arr[i, n_between:] == cell_arr[j, n_between:], axis=1) if mixed
+                    else np.zeros(len(i), dtype=bool))
     pairs = pd.DataFrame({
         "a": [labels[x] for x in i], "b": [labels[x] for x in j], "diff": diff, "se": se, "q": q, "p": p,
-        "significant": p < a,
+        "significant": p < a, "between_only": between_only.astype(bool),
     })
     mdf = pd.DataFrame([dict(zip(facs, c)) for c in cells], index=pd.Index(labels, name="cell"))
     mdf["mean"] = means
     mdf["n"] = nn
     result = PosthocResult(
         effect=name, factors=facs, means=mdf, pairs=pairs, k=k, df=df, mse=mse, alpha=a,
-        summary=summarize(labels, means, i, j, p, a),
+        summary=summarize(labels, means, i, j, p, a), untestable=untestable,
     )
     table.posthoc[name] = result
     return result

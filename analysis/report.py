@@ -184,15 +184,73 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     significant = table.significant()
     results = {"dv": ai.dv, "within": ai.within, "between": ai.between, "significant": significant,
                "effects": json.loads(table.to_json()),
-               "posthoc": {e: table.posthoc[e].summary for e in table.posthoc}}
+               "posthoc": {e: table.posthoc[e].summary if not table.posthoc[e].untestable
+                           else f"not tested: {table.posthoc[e].untestable}" for e in table.posthoc}}
+    short = short_cells(ai, design)
+    if short:
+        results["cells_with_fewer_answers"] = short
     (out / "anova_summary.json").write_text(json.dumps(results, indent=2, ensure_ascii=False) + "\n")
     kind = "Mixed" if ai.between else "Repeated-measures"
     corrected = ("<details><summary>Sphericity: the same table with Greenhouse–Geisser corrected degrees of "
                  "freedom and p (Mauchly's W, ε and Huynh–Feldt in anova.json)</summary>"
                  f"{render(table, 'html', correction='gg')}</details>\n")
+    note = _anova_note(design) + (f" {short_cells_note(short)}" if short else "")
     return {"title": f"{kind} ANOVA of {ai.dv} (the paper's analysis)", "html": render(table, "html") + corrected,
-            "note": _anova_note(design), "figures": figs, "results": results,
+            "note": note, "figures": figs, "results": results,
             "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova_all.md", "anova_gg.md", "cell_values.csv"]}
+
+
+def planned_answers(design: DesignInfo, keys: list[str]) -> pd.DataFrame | None:
+    """Answers the design plans per participant × cell: test conditions of the cell × repetitions.
+
+    ``keys`` are the cell's factors (between and within); conditions.csv is grouped by those of them it
+    has (a between factor it lacks does not change which stimuli a participant sees). Column ``planned``;
+    None when conditions.csv names none of the factors but some are asked for.
+    """
+    tests = design.test_conditions
+    present = [k for k in keys if k in tests.columns]
+    if keys and not present:
+        return None
+    if not present:
+        return pd.DataFrame({"planned": [len(tests) * design.repetitions]})
+    frame = tests.astype({k: str for k in present}).groupby(present, observed=True).size()
+    return (frame * design.repetitions).rename("planned").reset_index()
+
+
+def short_cells(ai, design: DesignInfo, limit: int = 5) -> dict | None:
+    """Participant × cell values that rest on fewer answers than the design plans (a missing repetition is
+    otherwise averaged away silently: the mean of 1 answer sits beside means of 2). None when there are none.
+
+    Returns ``count`` (values short), ``cells`` (participant × cell values in all) and ``examples`` (up to
+    ``limit``: participant, cell, answers ``n`` and ``planned``).
+    """
+    keys = [*ai.between, *[f for f in ai.within if f in design.within]]
+    if "n" not in ai.data:
+        return None
+    values = ai.data.drop_duplicates(["participant", *keys])[["participant", *keys, "n"]]
+    planned = planned_answers(design, keys)
+    if planned is None:
+        return None
+    on = [k for k in keys if k in planned.columns]
+    merged = (values.astype({k: str for k in on}).merge(planned, on=on, how="left") if on
+              else values.assign(planned=int(planned["planned"].iloc[0])))
+    short = merged[merged["planned"].notna() & (merged["n"] < merged["planned"])]
+    if short.empty:
+        return None
+    examples = [{"participant": str(r["participant"]), "cell": "/".join(str(r[k]) for k in keys),
+                 "n": int(r["n"]), "planned": int(r["planned"])} for _, r in short.head(limit).iterrows()]
+    return {"count": int(len(short)), "cells": int(len(merged)), "examples": examples}
+
+
+def short_cells_note(short: dict) -> str:
+    """The report's sentence on participant × cell values with fewer answers than planned."""
+    shown = "; ".join(f"participant {e['participant']}, {e['cell']} ({e['n']} of {e['planned']})"
+                      for e in short["examples"])
+    more = f"; and {short['count'] - len(short['examples'])} more" if short["count"] > len(short["examples"]) else ""
+    values = "value rests" if short["count"] == 1 else "values rest"
+    return (f"{short['count']} of {short['cells']} participant × cell {values} on fewer answers than the design "
+            f"plans and {'is' if short['count'] == 1 else 'are'} the mean of the answers there are: {shown}{more} "
+            f"(cell_values.csv, column n).")
 
 
 def _anova_not_computed(design: DesignInfo, data: pd.DataFrame, ai, value: float) -> dict:
@@ -263,7 +321,7 @@ def _models_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict |
     if table.empty:
         return None
     table.to_csv(out / "additional_models.csv", index=False, lineterminator="\n")
-    shown = table.assign(chi2=table["chi2"].round(3), p=table["p"].map(lambda p: f"{p:.4f}"))
+    shown = table.assign(chi2=table["chi2"].round(3), p=table["p"].map(lambda p: "" if pd.isna(p) else f"{p:.4f}"))
     html = "".join(_frame_html(g.drop(columns=["model", "note"]), f"{model} — {g['note'].iloc[0]}", index=False)
                    for model, g in shown.groupby("model", sort=False))
     return {"title": "Additional analyses (modern alternatives, not in the paper)", "html": html, "figures": [],

@@ -69,12 +69,13 @@ def effect_statistics(row, p: float, noise: float) -> dict[str, str]:
     """F, p, η², nc and power of one effect as printed.
 
     ``—`` where F is undefined (no error variance or df: nothing is tested), ∞ where only the error term
-    is rounding noise, 0 where the effect's own SS is (its F, η² and nc are then noise too).
+    is rounding noise (the engine's F = ∞, so that the JSON, with F null, p 0 and power 1, says the same),
+    0 where the effect's own SS is (its F, η² and nc are then noise too).
     """
     if math.isnan(float(row["F"])):
         return dict.fromkeys(("F", "p", "eta2", "nc", "power"), UNTESTABLE)
     shown = {"p": format_p(p), "power": format_num(row["power"])}
-    if abs(row["mse"] * row["df2"]) <= noise:   # a ratio to rounding noise: F → ∞ and observed power → 1
+    if math.isinf(float(row["F"])):   # a ratio to rounding noise: F → ∞ and observed power → 1
         return shown | {"F": "∞", "eta2": format_num(row["eta2_partial"]), "nc": "∞", "power": format_num(1.0)}
     if abs(row["ss"]) <= noise:
         return shown | dict.fromkeys(("F", "eta2", "nc"), format_num(0.0))
@@ -83,12 +84,26 @@ def effect_statistics(row, p: float, noise: float) -> dict[str, str]:
 
 
 def posthoc_text(ph, testable: bool) -> str:
-    """The post-hoc cell: the paper's summary, ``n.s.`` when Tukey found no pair, ``—`` for an untested effect."""
+    """The post-hoc cell: the paper's summary, ``n.s.`` when Tukey found no pair, ``—`` for an untested effect
+    (its F is 0/0, or Tukey found its error term without variance)."""
     if ph is None:
         return ""
-    if not testable:
+    if not testable or ph.untestable:
         return UNTESTABLE
     return ph.summary or NOT_SIGNIFICANT
+
+
+def within_df(table: AnovaTable, factors) -> int:
+    """Contrast dimension d of an effect's within part: ε and Mauchly exist only where d ≥ 2."""
+    return math.prod(len(table.design.within[f]) - 1 for f in factors if f in table.design.within)
+
+
+def format_eps(eps: float, d: int) -> str:
+    """ε as printed: blank where no correction applies (d < 2), ``—`` where it applies but the error SSCP
+    is singular (no variance in some contrast: ε would be a ratio of rounding noise; p and dof uncorrected)."""
+    if math.isnan(eps):
+        return UNTESTABLE if d >= 2 else ""
+    return format_num(eps, 3)
 
 
 def format_df(x: float) -> str:
@@ -170,13 +185,15 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
             "dof": f"{format_df(row['df1'] * scale)}, {format_df(row['df2'] * scale)}",
             "ms": format_ss(row["ms"], noise),
             **effect_statistics(row, p, noise),
-            "eps": format_num(eps, 3),
+            "eps": format_eps(eps, within_df(table, row["factors"])) if correction != "none" else "",
             "posthoc": posthoc_text(table.posthoc.get(name), not math.isnan(float(row["F"]))),
             "numbers": [None if math.isnan(float(row[c])) else float(row[c]) for c in EFFECT_COLUMNS],
             "p_reported": p,
             "significant": p < a,
         })
     sec_list = [{"order": o, "title": _order_title(o), "rows": sections[o]} for o in sorted(sections)]
+    untested = [r["effect"] for s in sec_list for r in s["rows"]
+                if getattr(table.posthoc.get(r["name"]), "untestable", "")]
     strata = []
     if all_rows:
         for label, s in table.strata.iterrows():
@@ -187,7 +204,8 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
     show_posthoc = bool(table.posthoc)
     headers = list(HEADERS) + (["ε"] if correction != "none" else []) + (["post-hoc (Tukey)"] if show_posthoc else [])
     return {
-        "caption": caption if caption is not None else default_caption(table, all_rows, a, correction),
+        "caption": caption if caption is not None else default_caption(table, all_rows, a, correction) + (
+            f" Tukey: {', '.join(untested)} not tested (—), their error term has no variance." if untested else ""),
         "sections": sec_list,
         "strata": strata,
         "headers": headers,
@@ -219,6 +237,11 @@ def render(table: AnovaTable, fmt: str = "md", all_rows: bool = False, correctio
         raise AnalysisError(f"unknown table format {fmt!r}; choose one of {', '.join(FORMATS)}")
     ctx = table_context(table, all_rows=all_rows, correction=correction, alpha=alpha, caption=caption,
                         sep="*")
+    if fmt == "csv":   # no caption in CSV: the post-hoc cell of an untested Tukey says why
+        for row in (r for section in ctx["sections"] for r in section["rows"]):
+            ph = table.posthoc.get(row["name"])
+            if ph is not None and ph.untestable:
+                row["posthoc"] = f"{UNTESTABLE} ({ph.untestable})"
     if fmt == "tex":   # pdflatex has no text glyph for ∞
         for row in (r for section in ctx["sections"] for r in section["rows"]):
             row.update({key: row[key].replace("∞", r"$\infty$") for key in ("F", "nc")})
