@@ -292,14 +292,15 @@ def test_votes_of_one_participant_are_not_pooled_as_independent(reports):
     results = summary["sections"][0]["results"]
     tidy = pd.read_csv(folder / "report" / "responses_tidy.csv", dtype={"participant": str, "chosen": str})
     tests = tidy[~tidy["practice"]]
-    counts = pd.crosstab(tests["participant"], tests["chosen"])
+    levels = ["0.5", "12", "23.5", "35", "46.5", "58"]   # a level nobody chose still counts (zero votes)
+    counts = pd.crosstab(tests["participant"], tests["chosen"]).reindex(columns=levels, fill_value=0)
     fried = stats.friedmanchisquare(*(counts[c].to_numpy() for c in counts))
     overall = results["tests"][0]
     assert (overall["cell"], overall["test"], overall["participants"]) == ("all", "Friedman", 16)
     assert overall["statistic"] == pytest.approx(fried.statistic) and overall["p"] == pytest.approx(fried.pvalue)
     for row in results["tests"][1:]:
         cell = tests[tests["PARAMETER"] == row["cell"]]
-        votes = cell["chosen"].value_counts().reindex(["0.5", "12", "23.5", "35", "46.5", "58"], fill_value=0)
+        votes = cell["chosen"].value_counts().reindex(levels, fill_value=0)
         assert row["test"] == "chi-squared goodness of fit" and row["participants"] == 16
         assert row["p"] == pytest.approx(stats.chisquare(votes.to_numpy()).pvalue)
     most = results["most_voted"]
