@@ -19,12 +19,11 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     from stimuli.bodies import body_for_actor
     from stimuli.motion.bvh import read_bvh
-    from stimuli.motion.generate import generate
-    from stimuli.motion.loop import make_loop, repeat, seam_error
+    from stimuli.motion.loop import make_loop, seam_error
     from stimuli.motion.modifier import thesis_parameters
     from stimuli.motion.quality import motion_quality
     from stimuli.motion.retarget import retarget
-    from stimuli.motion.style import params_for_actor
+    from stimuli.motion.style import actor_gait
     from stimuli.protocol import load_protocol
 
     proto = load_protocol(ROOT / "protocols" / "exp1_shape_motion.yaml")
@@ -51,8 +50,7 @@ def main() -> None:
         sources = {}
         for gait, spec in proto.gaits.items():
             t0 = time.perf_counter()
-            m = generate(params_for_actor(a.id, a.height_m, a.bmi, a.sex, gait, spec.cadence_spm, spec.speed_mps,
-                                          seed=proto.seed), a.height_m)
+            m = actor_gait(a, gait, spec.cadence_spm, spec.speed_mps, proto.seed, fps=30.0, cycles=2)
             sources[gait] = (m, (time.perf_counter() - t0) * 4.0 / m.duration_s)
         sources.update({k: (v, float("nan")) for k, v in cmu.items()})
         for label, (src, gen_s) in sources.items():

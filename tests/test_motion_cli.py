@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from stimuli.cli import main
-from stimuli.commands.motion_cmd import parse_body
+from stimuli.commands.checks import parse_body
 from stimuli.errors import StimuliError
 from stimuli.motion import Motion
 from stimuli.motion.markers import MARKERS
@@ -108,7 +108,8 @@ def test_average_checks_and_explains_the_body_it_records(tmp_path, capsys):
     (["motion", "import", "{bad}", "--out", "{out}"], "not a readable BVH"),
     (["motion", "import", "{short}", "--loop", "--out", "{out}"], "fewer than one whole gait cycle"),
     (["motion", "metrics", "{missing}"], "not found"),
-    (["motion", "generate", "--cadence", "5", "--out", "{out}"], "cadence_spm"),
+    (["motion", "generate", "--cadence", "10", "--out", "{out}"], "--cadence: 10 is outside the human range 40–260"),
+    (["motion", "generate", "--speed", "9", "--out", "{out}"], "--speed: 9 is outside the human range 0.2–6 m/s"),
 ])
 def test_user_errors_exit_2(tmp_path, capsys, args, msg):
     (tmp_path / "bad.bvh").write_text("nonsense")
@@ -123,8 +124,33 @@ def test_user_errors_exit_2(tmp_path, capsys, args, msg):
 
 
 def test_parse_body():
+    """One parser for every --body (preview's own accepted age=3 and ignored it)."""
     assert parse_body("sex=m,height=1.8,bmi=25") == {"sex": "M", "height_m": 1.8, "bmi": 25.0}
+    assert parse_body("SEX=F, Height=1.6, BMI=28.1") == {"sex": "F", "height_m": 1.6, "bmi": 28.1}
     with pytest.raises(StimuliError, match="missing bmi"):
         parse_body("sex=M,height=1.8")
     with pytest.raises(StimuliError, match="unknown key"):
-        parse_body("sex=M,height=1.8,bmi=2,age=3")
+        parse_body("sex=M,height=1.8,bmi=25,age=3")
+    with pytest.raises(StimuliError, match="sex must be F or M"):
+        parse_body("sex=X,height=1.8,bmi=25")
+
+
+def test_preview_and_motion_read_body_the_same_way(run_cli, tmp_path):
+    for command in (["preview", "--stepping", "--out", tmp_path / "p.mp4"],
+                    ["motion", "retarget", WALK, "--out", tmp_path / "r.npz"]):
+        code, _, err = run_cli(*command, "--body", "sex=M,height=1.8,bmi=25,age=3")
+        assert code == 2 and "unknown key 'age'" in err, command
+
+
+def test_generate_checks_cadence_and_speed_once_with_the_protocols_bounds():
+    """--cadence 10 passed the CLI's > 0 and failed in the generator naming cadence_spm (20–260), while a
+    protocol's gaits allow 40–260: one set of bounds now, the protocol's."""
+    from stimuli.motion.generate import CADENCE_RANGE_SPM, SPEED_RANGE_MPS, GaitParams
+    from stimuli.protocol import GaitSpec
+
+    for field, bounds in (("cadence_spm", CADENCE_RANGE_SPM), ("speed_mps", SPEED_RANGE_MPS)):
+        limits = {k: getattr(m, k) for m in GaitSpec.model_fields[field].metadata for k in ("gt", "lt", "ge", "le")
+                  if getattr(m, k, None) is not None}
+        assert tuple(limits.values()) == bounds, (field, limits)
+    with pytest.raises(StimuliError, match="cadence_spm must be within 40–260"):
+        GaitParams(cadence_spm=30).resolved()

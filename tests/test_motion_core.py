@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from stimuli.bodies.rig import quaternions_to_matrices
 from stimuli.errors import StimuliError
 from stimuli.motion import Motion, quat
 from stimuli.motion.amass import SMPL_JOINTS, read_amass, write_amass
@@ -39,7 +40,7 @@ def test_quat_mul_matches_scipy(v):
     a, b = np.array(v[:3]), np.array(v[3:])
     got = quat.mul(quat.from_axis_angle(a), quat.from_axis_angle(b))
     ref = Rotation.from_rotvec(a) * Rotation.from_rotvec(b)
-    assert np.allclose(quat.to_matrix(got), ref.as_matrix(), atol=1e-9)
+    assert np.allclose(quaternions_to_matrices(got), ref.as_matrix(), atol=1e-9)
     x = np.array([0.3, -1.0, 2.0])
     assert np.allclose(quat.rotate(got, x), ref.apply(x), atol=1e-9)
 
@@ -57,7 +58,7 @@ def test_from_euler_is_intrinsic_bvh_order():
     # BVH "Zrotation Xrotation" = Rz · Rx, intrinsic.
     q = quat.from_euler(np.array([30.0, 0.0, 45.0]), "ZYX")
     ref = Rotation.from_euler("z", 30, degrees=True) * Rotation.from_euler("x", 45, degrees=True)
-    assert np.allclose(quat.to_matrix(q), ref.as_matrix())
+    assert np.allclose(quaternions_to_matrices(q), ref.as_matrix())
 
 
 # ---------------------------------------------------------------- Motion + npz
@@ -266,3 +267,36 @@ def test_smplx_layout_and_frame_rate_key(tmp_path):
     p = m.positions()[0]
     # Standing upright in y-up: head above pelvis above ankles.
     assert p[SMPL_JOINTS.index("head"), 1] > p[0, 1] > p[SMPL_JOINTS.index("left_ankle"), 1]
+
+
+# ---------------------------------------------------------------- foot clean-up
+def test_flat_feet_of_a_clip_that_does_not_loop_keep_their_own_heading():
+    """Retargeting passes cyclic=False for motions that are not loops, and flatten_feet ignored it: a
+    contact at the clip's end was joined to the one at its start, so a turning walker's first
+    footprint turned towards the last one's heading (28° in its middle frame instead of 6°)."""
+    from stimuli.motion.footfix import flatten_feet
+    from stimuli.motion.generate import canonical_skeleton
+
+    names, parents, offsets = canonical_skeleton(1.75)
+    t = 40
+    rot = np.tile([1.0, 0, 0, 0], (t, len(names), 1))
+    yaw = np.radians(np.linspace(0.0, 90.0, t))  # the whole body turns a quarter circle
+    rot[:, 0] = quat.from_axis_angle(yaw[:, None] * [0.0, 1.0, 0.0])
+    m = Motion(30.0, names, parents, offsets, rot, np.zeros((t, 3)), {"source": "test"})
+    contact = np.zeros(t, bool)
+    contact[:6] = contact[-6:] = True
+    ankle = names.index("l_ankle")
+
+    def heading(cyclic, frame):
+        out = flatten_feet(m, m.rotations, m.root_translation, {"l": contact, "r": contact}, cyclic)
+        grot = m.global_transforms(out, m.root_translation)[0]
+        fwd = quat.rotate(grot[frame, ankle], np.array([0.0, 0.0, 1.0]))
+        return np.degrees(np.arctan2(fwd[0], fwd[2]))
+
+    def mean_deg(frames):
+        return np.degrees(np.arctan2(np.sin(yaw[frames]).mean(), np.cos(yaw[frames]).mean()))
+
+    # Frames 2 and 36 are flat (mid-stance) in their own 6-frame contacts, frame 38 in the loop's 12-frame one.
+    assert heading(False, 2) == pytest.approx(mean_deg(slice(0, 6)), abs=1e-6)
+    assert heading(False, 36) == pytest.approx(mean_deg(slice(34, 40)), abs=1e-6)
+    assert heading(True, 38) == pytest.approx(mean_deg(contact), abs=1e-6)  # a loop's contact goes on across the seam

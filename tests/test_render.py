@@ -140,11 +140,11 @@ def _blobs(frame, threshold=100):
 
 
 def test_point_light_clip_has_exactly_15_bright_dots(body):
-    from stimuli.render.pointlight import MARKERS
+    from stimuli.motion.markers import MARKERS, body_markers
+    from stimuli.render.clip import centred_root, placements
+    from stimuli.render.pointlight import DOT_RADIUS_M
 
     assert len(MARKERS) == 15
-    from stimuli.render.clip import centred_root, placements
-    from stimuli.render.pointlight import DOT_RADIUS_M, marker_positions
 
     look = _look("point_light", width=480, height=270, azimuth=30.0, background="#000000")
     figure = _figure(body, look)
@@ -153,7 +153,7 @@ def test_point_light_clip_has_exactly_15_bright_dots(body):
     # Where the projected dots are apart (no natural overlap, e.g. a heel passing behind a knee),
     # the frame must show exactly 15 blobs; no frame may ever show more.
     _, view = placements(look, 1, body.anthropometry.height_m)
-    xy = view.project(marker_positions(body, figure.rotations, centred_root(figure)))
+    xy = view.project(body_markers(body, figure.rotations, centred_root(figure)))
     gaps = np.linalg.norm(xy[:, :, None] - xy[:, None], axis=-1) + np.eye(15) * 1e9
     radius_px = 0.5 * look.height / np.tan(np.radians(look.fov_deg) / 2) * DOT_RADIUS_M / look.distance_m
     apart = gaps.min(axis=(1, 2)) > 2 * radius_px + 3

@@ -268,6 +268,49 @@ def test_method_motion_follows_level_settings(settings, expected, protocol_path,
     assert got == expected
 
 
+def test_exp2_clips_of_a_condition_retarget_each_motion_once(protocol_path, tmp_path, monkeypatch):
+    """NoCOM_COM and COM_NoCOM loaded and retargeted both motions again for every clip (~0.5 s each);
+    a rewritten file is read again."""
+    from stimuli.design import build_design
+    from stimuli.motion.generate import GaitParams, generate
+    from stimuli.protocol import load_protocol
+    from stimuli.render import sources
+    from stimuli.render.settings import look_for
+
+    protocol = load_protocol(protocol_path("exp2_com_vs_average"))
+    motions = tmp_path / "physics"
+    walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.6, fps=30, cycles=2)
+    for name in ("nocom/F_walk.npz", "motions/COM_F_Hi1_walk.npz"):
+        (motions / name).parent.mkdir(parents=True, exist_ok=True)
+        walk.save(motions / name)
+    calls, real = [], sources.on_rig
+    monkeypatch.setattr(sources, "on_rig", lambda motion, body: calls.append(1) or real(motion, body))
+    pair = [s for s in build_design(protocol).stimuli
+            if s.kind == "test" and s.body_actor == "F_Hi1" and "walk" in s.levels.values()]
+
+    def figures():
+        for s in pair:
+            sources.protocol_figures(protocol, s, look_for(protocol, s, (160, 90), 10, False), motions)
+
+    figures()
+    assert sorted(s.arrangement for s in pair) == [("COM", "NoCOM"), ("NoCOM", "COM")] and len(calls) == 2
+    walk.slice(0, 32).save(motions / "nocom" / "F_walk.npz")
+    figures()
+    assert len(calls) == 3
+
+
+def test_library_checks_limit_and_motions_as_the_cli_does(protocol_path, tmp_path):
+    """render accepted --limit 0 only through the API; --motions was checked only by the CLI."""
+    from stimuli.errors import StimuliError
+    from stimuli.render.pipeline import render_protocol
+
+    with pytest.raises(StimuliError, match="--limit: expected a whole number >= 1, got 0"):
+        render_protocol(protocol_path("exp1_shape_motion"), tmp_path / "a", limit=0, progress=False)
+    with pytest.raises(StimuliError, match="has no METHOD factor"):
+        render_protocol(protocol_path("exp1_shape_motion"), tmp_path / "b", motions_dir=tmp_path, progress=False)
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
 @pytest.mark.parametrize("args, message", [
     (["--resolution", "7682x90"], "--resolution: width 7682 is outside 64–7680 pixels"),
     (["--resolution", "62x90"], "--resolution: width 62 is outside 64–7680 pixels"),

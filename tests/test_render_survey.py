@@ -26,9 +26,16 @@ def test_complete_render_writes_the_survey(tmp_path, protocol_path, run_cli):
     assert "survey: qsf" in stdout
 
 
-def test_partial_render_exports_no_survey(tmp_path, protocol_path, run_cli):
+def test_partial_render_exports_no_survey(tmp_path, protocol_path, run_cli, monkeypatch):
+    """The CLI read the protocol and built the design again after the render (and a third time for
+    --motions): render_protocol's report carries the design now."""
+    import stimuli.protocol
+
     path = short(tmp_path, protocol_path, "exp1_shape_motion")
     out = tmp_path / "render"
+    loads, real = [], stimuli.protocol.load_protocol
+    monkeypatch.setattr(stimuli.protocol, "load_protocol", lambda p: loads.append(p) or real(p))
     code, stdout, _ = run_cli("render", path, "--out", out, "--resolution", "160x90", "--fps", "10", "--workers", "1",
                               "--poses", "procedural", "--no-progress", "--limit", "1")
     assert code == 0 and "survey: not exported" in stdout and not (out / "survey").exists()
+    assert loads == [path]

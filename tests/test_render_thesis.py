@@ -45,10 +45,10 @@ def _setup(protocol_path, parameter: str, resolution="960x270", fps=10, duration
 
 
 def _markers(figure):
+    from stimuli.motion.markers import MARKERS, body_markers
     from stimuli.render.clip import centred_root
-    from stimuli.render.pointlight import MARKERS, marker_positions
 
-    pos = marker_positions(figure.body, figure.rotations, centred_root(figure))
+    pos = body_markers(figure.body, figure.rotations, centred_root(figure))
     return {name: pos[:, k] for k, name in enumerate(MARKERS)}
 
 
@@ -66,13 +66,13 @@ def _increasing(values, what):
 
 def _projected(look, figures):
     """Pixel positions (T, k·15, 2) of every walker's markers, as the renderer places them."""
+    from stimuli.motion.markers import body_markers
     from stimuli.render.clip import apply_pose, centred_root, placements
-    from stimuli.render.pointlight import marker_positions
 
     poses, view = placements(look, len(figures), max(f.body.anthropometry.height_m for f in figures))
     xy = []
     for pose, f in zip(poses, figures):
-        world = marker_positions(f.body, f.rotations, centred_root(f))
+        world = body_markers(f.body, f.rotations, centred_root(f))
         xy.append(view.project(apply_pose(pose, world.reshape(-1, 3)))[..., :2].reshape(len(world), 15, 2))
     return np.concatenate(xy, axis=1)
 
@@ -113,12 +113,15 @@ def test_point_light_row_through_the_renderer(protocol_path, tmp_path):
 
 
 def test_view_angle_follows_the_parameter_level(protocol_path):
+    from stimuli.motion.markers import MARKERS
+
+    left, right = MARKERS.index("l_shoulder"), MARKERS.index("r_shoulder")
     shoulder_px = {}
     for parameter, view in (("arm_abduction", 0.0), ("arm_swing", 90.0), ("hip_torso_twist", 45.0)):
         _, _, look, figures = _setup(protocol_path, parameter)
         assert look.azimuth_deg == view
         xy = _projected(look, figures[1:2])                # the unchanged walker (12 %)
-        shoulder_px[view] = float(np.abs(xy[:, 2, 0] - xy[:, 3, 0]).mean())
+        shoulder_px[view] = float(np.abs(xy[:, left, 0] - xy[:, right, 0]).mean())
     # Seen from the front the shoulders are a body width apart on screen, from the side nearly one.
     assert shoulder_px[0.0] > 2 * shoulder_px[45.0] * 0.6 > 0
     assert shoulder_px[90.0] < 0.3 * shoulder_px[0.0], shoulder_px
@@ -127,19 +130,19 @@ def test_view_angle_follows_the_parameter_level(protocol_path):
 def test_arm_abduction_and_bob_grow_with_strength(protocol_path):
     _, _, _, figures = _setup(protocol_path, "arm_abduction_bob", fps=30)
     m = [_markers(f) for f in figures]
-    out = [float(np.mean(k["wrist.L"][:, 0] - k["shoulder.L"][:, 0] + k["shoulder.R"][:, 0] - k["wrist.R"][:, 0]))
+    out = [float(np.mean(k["l_wrist"][:, 0] - k["l_shoulder"][:, 0] + k["r_shoulder"][:, 0] - k["r_wrist"][:, 0]))
            for k in m]
     _increasing(out, "wrist distance out from the shoulders")
-    bob = [float(np.ptp(k["wrist.L"][:, 0] - k["shoulder.L"][:, 0])) for k in m]
+    bob = [float(np.ptp(k["l_wrist"][:, 0] - k["l_shoulder"][:, 0])) for k in m]
     _increasing(bob, "sideways wrist excursion (arm bob)")
 
 
 def test_arm_abduction_alone_leaves_the_legs_alone(protocol_path):
     _, _, _, figures = _setup(protocol_path, "arm_abduction", fps=30)
     m = [_markers(f) for f in figures]
-    wrists = [float(np.mean(k["wrist.L"][:, 0] - k["shoulder.L"][:, 0])) for k in m]
+    wrists = [float(np.mean(k["l_wrist"][:, 0] - k["l_shoulder"][:, 0])) for k in m]
     _increasing(wrists, "left wrist abduction")
-    heels = np.array([np.mean(k["heel.L"][:, 0] - k["heel.R"][:, 0]) for k in m])
+    heels = np.array([np.mean(k["l_heel"][:, 0] - k["r_heel"][:, 0]) for k in m])
     assert np.ptp(heels) < 0.005, heels
 
 
@@ -151,7 +154,7 @@ def test_lower_body_slows_twists_hips_and_widens_the_base(protocol_path):
     ratios = speeds / speeds[1]
     assert np.allclose(ratios, [1.1, 1.0, 0.9, 0.805026, 0.7, 0.6], atol=0.03), ratios
     m = [_markers(f) for f in figures]
-    base = [float(np.mean(k["heel.L"][:, 0] - k["heel.R"][:, 0])) for k in m]
+    base = [float(np.mean(k["l_heel"][:, 0] - k["r_heel"][:, 0])) for k in m]
     _increasing(base, "heel spacing")
     twist = [float(np.ptp(_heading_deg(f.rotations[:, 0]))) for f in figures]   # the rig's root: pelvis
     _increasing(twist[1:], "hip twist range")      # 0.5 %: −0.8 × the twist (reversed, smaller)
@@ -233,10 +236,10 @@ def test_validation_sources_differ_as_described(protocol_path):
     m = {level: _markers(f) for level, f in figs.items()}
 
     def abduction(k):
-        return float(np.mean(k["wrist.L"][:, 0] - k["shoulder.L"][:, 0]))
+        return float(np.mean(k["l_wrist"][:, 0] - k["l_shoulder"][:, 0]))
 
     def base(k):
-        return float(np.mean(k["heel.L"][:, 0] - k["heel.R"][:, 0]))
+        return float(np.mean(k["l_heel"][:, 0] - k["r_heel"][:, 0]))
 
     ae = next(a for a in protocol.actors if a.id == "AE")
     p = thesis_parameters(ae.height_m, ae.body_fat_pct, ae.chest_m, ae.waist_m / ae.hip_m)
@@ -246,7 +249,7 @@ def test_validation_sources_differ_as_described(protocol_path):
     grown = base(m["modifier"]) - base(m["lean_mocap"])
     assert abs(grown - 2 * p["base_offset_mm"] / 1000) < 0.01, grown
     # the keyframed stand-in is a different walk altogether (the generator's), not the capture
-    assert np.abs(m["keyframed"]["knee.L"] - m["lean_mocap"]["knee.L"]).max() > 0.05
+    assert np.abs(m["keyframed"]["l_knee"] - m["lean_mocap"]["l_knee"]).max() > 0.05
 
 
 def test_bvh_capture_is_part_of_the_inputs_hash(protocol_path, tmp_path):

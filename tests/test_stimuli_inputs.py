@@ -306,7 +306,7 @@ def test_bundled_protocols_still_validate(run_cli):
 
 @pytest.mark.parametrize("args, message", [
     (["motion", "generate", "--bmi", "500", "--out", "g.npz"], "--bmi: 500 is outside the human range"),
-    (["motion", "generate", "--cadence", "0", "--out", "g.npz"], "--cadence: expected steps per minute > 0"),
+    (["motion", "generate", "--cadence", "0", "--out", "g.npz"], "--cadence: 0 is outside the human range 40–260"),
     (["motion", "generate", "--protocol", EXP1, "--actor", "F_Hi1", "--height", "1.9", "--out", "g.npz"],
      "--height: the body comes from --actor F_Hi1"),
     (["motion", "generate", "--protocol", EXP1, "--out", "g.npz"], "also give --actor"),

@@ -45,6 +45,43 @@ def human_body(height_m, bmi, height_option: str = "--height", bmi_option: str =
     in_range(bmi_option, bmi, BMI_RANGE, "kg/m²")
 
 
+BODY_KEYS = {"sex": "sex", "height": "height_m", "bmi": "bmi"}
+
+
+def parse_body(spec: str, option: str = "--body") -> dict:
+    """``sex=M,height=1.80,bmi=25`` (keys in any case and order) → {"sex": "M", "height_m": 1.8, "bmi": 25.0},
+    every key once, none unknown, a human height and BMI.
+
+    >>> parse_body("SEX=f,height=1.6,bmi=28.1")
+    {'sex': 'F', 'height_m': 1.6, 'bmi': 28.1}
+    """
+    out = {}
+    for part in spec.split(","):
+        if part.count("=") != 1:  # "sex=M;height=1.8" is one part with two '='
+            raise StimuliError(f"{option} {spec!r}: expected comma-separated key=value pairs like "
+                               "sex=M,height=1.80,bmi=25")
+        k, v = (x.strip() for x in part.split("=", 1))
+        key = BODY_KEYS.get(k.lower())
+        if key is None:
+            raise StimuliError(f"{option}: unknown key {k!r} (expected sex, height, bmi)")
+        if key in out:
+            raise StimuliError(f"{option} {spec!r}: {k} is given twice")
+        if key == "sex":
+            out[key] = v.upper()
+            if out[key] not in ("F", "M"):
+                raise StimuliError(f"{option}: sex must be F or M, got {v!r}")
+            continue
+        try:
+            out[key] = float(v)
+        except ValueError:
+            raise StimuliError(f"{option}: {k} must be a number, got {v!r}") from None
+    missing = [k for k, key in BODY_KEYS.items() if key not in out]
+    if missing:
+        raise StimuliError(f"{option} {spec!r}: missing {', '.join(missing)}")
+    human_body(out["height_m"], out["bmi"], f"{option} height", f"{option} bmi")
+    return out
+
+
 def base_url(option: str, url: str | None, absolute: bool):
     """``url`` if clip paths can be appended to it: no spaces, no query or fragment (``…?a=1/clips/x.mp4``
     is no clip address), and with ``absolute`` (Qualtrics loads the clips from elsewhere) an http(s)

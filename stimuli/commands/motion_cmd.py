@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from stimuli.commands.checks import at_least, human_body, in_range, positive
+from stimuli.commands.checks import at_least, human_body, in_range, parse_body, positive
 from stimuli.errors import StimuliError
 from stimuli.fileio import check_output_dir, check_output_file
 
@@ -89,6 +89,8 @@ def register(subparsers) -> None:
 
     p = sub.add_parser("markers", help="the 15 point-light marker trajectories as CSV")
     p.add_argument("motion", type=Path)
+    p.add_argument("--body", help="sex=M,height=1.80,bmi=25: the body whose rig the motion is on; the markers are "
+                                  "then exactly the dots its point-light clips show")
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(func=run_markers)
 
@@ -101,37 +103,21 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_strip)
 
 
-def parse_body(spec: str) -> dict:
-    """``sex=M,height=1.80,bmi=25`` → {"sex": "M", "height_m": 1.8, "bmi": 25.0}."""
-    out = {}
-    for part in spec.split(","):
-        if part.count("=") != 1:  # "sex=M;height=1.8" is one part with two '='
-            raise StimuliError(f"--body {spec!r}: expected comma-separated key=value pairs like "
-                               "sex=M,height=1.80,bmi=25")
-        k, v = (x.strip() for x in part.split("=", 1))
-        if {"sex": "sex", "height": "height_m", "bmi": "bmi"}.get(k) in out:
-            raise StimuliError(f"--body {spec!r}: {k} is given twice")
-        if k == "sex":
-            out["sex"] = v.upper()
-        elif k in ("height", "bmi"):
-            try:
-                out["height_m" if k == "height" else "bmi"] = float(v)
-            except ValueError:
-                raise StimuliError(f"--body: {k} must be a number, got {v!r}") from None
-        else:
-            raise StimuliError(f"--body: unknown key {k!r} (expected sex, height, bmi)")
-    missing = {"sex", "height_m", "bmi"} - set(out)
-    if missing:
-        raise StimuliError(f"--body {spec!r}: missing {', '.join(sorted(missing))}")
-    human_body(out["height_m"], out["bmi"], "--body height", "--body bmi")
-    return out
-
-
 def _fit(spec: str):
     from stimuli.bodies import fit_body
 
     b = parse_body(spec)
     return fit_body(b["sex"], b["height_m"], b["bmi"])
+
+
+def _on_body(motion, args: argparse.Namespace):
+    """The body of ``--body``, whose rig ``motion`` must be on (metrics and markers use its mesh)."""
+    body = _fit(args.body)
+    if list(motion.joint_names) != list(body.rig.names):
+        raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its "
+                           f"rig; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
+                           "--out R.npz")
+    return body
 
 
 def _load(path: Path):
@@ -148,14 +134,19 @@ def _load(path: Path):
 
 
 def run_generate(args: argparse.Namespace) -> int:
+    from types import SimpleNamespace
+
     from stimuli.motion.bvh import write_bvh
-    from stimuli.motion.generate import generate
-    from stimuli.motion.style import params_for_actor
+    from stimuli.motion.generate import DEFAULT_PACE
+    from stimuli.motion.style import actor_gait
 
     _check_generate(args)
-    defaults = {"walk": (112.0, 1.2), "jog": (138.0, 2.2)}
-    cadence, speed = defaults[args.gait]
-    height, bmi, sex, actor_id, seed, extra = args.height or 1.75, args.bmi, args.sex or "M", "cli", args.seed or 0, {}
+    cadence, speed = DEFAULT_PACE[args.gait]
+    seed = args.seed or 0
+    # Without --bmi the trends are an average build's; the motion records no BMI.
+    actor = SimpleNamespace(id="cli", height_m=args.height or 1.75, bmi=22.0 if args.bmi is None else args.bmi,
+                            sex=args.sex or "M")
+    bmi = args.bmi
     if args.protocol:
         from stimuli.protocol import load_protocol
         proto = load_protocol(args.protocol)
@@ -164,19 +155,15 @@ def run_generate(args: argparse.Namespace) -> int:
             raise StimuliError(f"{args.protocol}: no gait {args.gait!r} in gaits ({', '.join(proto.gaits)})")
         cadence, speed = gait.cadence_spm, gait.speed_mps
         seed = proto.seed if args.seed is None else args.seed
-        found = [a for a in proto.actors if a.id == args.actor]
-        if not found:
+        actor = next((a for a in proto.actors if a.id == args.actor), None)
+        if actor is None:
             raise StimuliError(f"{args.protocol}: no actor {args.actor!r}; actors are "
                                f"{', '.join(a.id for a in proto.actors)}")
-        a = found[0]
-        height, bmi, sex, actor_id = a.height_m, a.bmi, a.sex, a.id
-        extra = {k: getattr(a, k) for k in ("waist_m", "hip_m", "chest_m", "body_fat_pct") if getattr(a, k, None)}
+        bmi = actor.bmi
     cadence = args.cadence if args.cadence is not None else cadence
     speed = args.speed if args.speed is not None else speed
-    params = params_for_actor(actor_id, height, bmi if bmi is not None else 22.0, sex, args.gait, cadence, speed,
-                              seed=seed, style=not args.no_style, **extra)
-    m = generate(params, height, fps=args.fps, cycles=args.cycles)
-    m.metadata.update(actor_id=actor_id, sex=sex, bmi=bmi)
+    m = actor_gait(actor, args.gait, cadence, speed, seed, args.fps, args.cycles, style=not args.no_style)
+    m.metadata.update(actor_id=actor.id, sex=actor.sex, bmi=bmi)
     print(m.save(args.out))
     if args.bvh:
         print(write_bvh(m, args.bvh))
@@ -186,10 +173,12 @@ def run_generate(args: argparse.Namespace) -> int:
 def _check_generate(args: argparse.Namespace) -> None:
     """Options of ``motion generate``: numbers in range, and the body from the options or from
     --protocol/--actor, never a mix of both (one of them would be silently ignored)."""
+    from stimuli.motion.generate import CADENCE_RANGE_SPM, SPEED_RANGE_MPS
+
     _check_npz_out(args.out)
     check_output_file(args.bvh, "--bvh")
-    positive("--cadence", args.cadence, "steps per minute > 0")
-    positive("--speed", args.speed, "a belt speed > 0 m/s")
+    in_range("--cadence", args.cadence, CADENCE_RANGE_SPM, "steps/min")
+    in_range("--speed", args.speed, SPEED_RANGE_MPS, "m/s")
     positive("--fps", args.fps, "a frame rate > 0")
     at_least("--cycles", args.cycles, 1)
     at_least("--seed", args.seed, 0)
@@ -286,11 +275,7 @@ def run_metrics(args: argparse.Namespace) -> int:
 
     check_output_file(args.json, "--json")
     m = _load(args.motion)
-    body = _fit(args.body) if args.body else None
-    if body is not None and list(m.joint_names) != list(body.rig.names):
-        raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its "
-                           f"rig; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
-                           "--out R.npz")
+    body = _on_body(m, args) if args.body else None
     if m.n_frames < MIN_METRIC_FRAMES:
         raise StimuliError(f"{args.motion}: {m.n_frames} frame(s) hold no gait cycle; the metrics need a motion of "
                            f"at least one cycle (≥ {MIN_METRIC_FRAMES} frames)")
@@ -345,7 +330,12 @@ def run_markers(args: argparse.Namespace) -> int:
     from stimuli.motion.markers import write_markers_csv
 
     check_output_file(args.out)
-    print(write_markers_csv(_load(args.motion), args.out))
+    m = _load(args.motion)
+    body = _on_body(m, args) if args.body else None
+    if body is None and m.metadata.get("naming") == "anny":
+        print(f"note: {args.motion} is on an Anny body's rig; give that body as --body for the dots its clips show "
+              "(without it the head and heels are placed from the skeleton alone)", file=sys.stderr)
+    print(write_markers_csv(m, args.out, body))
     return 0
 
 

@@ -52,7 +52,7 @@ def register(subparsers) -> None:
 def run_render(args: argparse.Namespace) -> int:
     from stimuli.errors import StimuliError
     from stimuli.render.manifest import verify_manifest
-    from stimuli.render.pipeline import render_protocol
+    from stimuli.render.pipeline import export_survey, render_protocol
 
     if args.verify:
         _check_manifest_present(args.out)
@@ -71,8 +71,11 @@ def run_render(args: argparse.Namespace) -> int:
                              source=args.poses, motions_dir=args.motions, warn=lambda line: print(f"warning: {line}"))
     print(report.summary())
     if not args.no_survey:
-        for line in survey_for_render_folder(args.protocol, args.out, report, args.video_base_url):
-            print(line)
+        missing, exports = export_survey(report, args.video_base_url)
+        if exports is None:
+            print(f"survey: not exported, {len(missing)} stimuli have no clip yet (render them all first)")
+        for r in exports or ():
+            print(f"survey: {r.format} → {r.path}")
     return 0
 
 
@@ -89,31 +92,17 @@ def _check_manifest_present(out_dir: Path) -> None:
 
 
 def _check_render_options(args: argparse.Namespace) -> None:
-    """Numbers in range, --motions only where the protocol reads it, the output folder usable;
-    all before the first clip is rendered."""
+    """Numbers in range and the output folder usable, before the protocol is read (``render_protocol``
+    checks --limit and --motions against it before the first clip)."""
     from stimuli.commands.checks import at_least
-    from stimuli.errors import StimuliError
     from stimuli.fileio import check_output_dir
-    from stimuli.protocol import load_protocol
-
     from stimuli.render.settings import check_fps, parse_resolution
 
     check_fps(args.fps)
     parse_resolution(args.resolution)
     at_least("--workers", args.workers, 1)
-    at_least("--limit", args.limit, 1)
     check_video_base_url(args.video_base_url)
     check_output_dir(args.out)
-    if args.motions is None:
-        return
-    protocol = load_protocol(args.protocol)
-    alternatives = protocol.factors_with_role("alternatives")
-    if not alternatives or alternatives[0].maps_to != "method":
-        raise StimuliError(f"--motions {args.motions}: {args.protocol} has no METHOD factor (maps_to: method), so "
-                           "it reads no motions of 'shapemotion physics protocol'; leave --motions out")
-    if not args.motions.is_dir():
-        raise StimuliError(f"--motions {args.motions}: folder not found (the --out folder of 'shapemotion physics "
-                           "protocol')")
 
 
 def check_video_base_url(url: str | None) -> None:
@@ -123,28 +112,58 @@ def check_video_base_url(url: str | None) -> None:
     base_url("--video-base-url", url, absolute=True)
 
 
-def survey_for_render_folder(protocol_path, out_dir, report, video_base_url=None) -> list[str]:
-    """Make the render folder a complete survey source: the design files and every survey export.
+def parse_camera(text: str) -> tuple[float, float, float, float]:
+    """--camera 'azimuth,elevation,distance,fov' within a protocol's clip.camera limits.
 
-    Only when every stimulus of the design has its clip (a ``--limit``/``--only`` render is partial,
-    and a survey pointing at missing clips would be wrong).
+    >>> parse_camera("35,10,4,40")
+    (35.0, 10.0, 4.0, 40.0)
     """
-    from stimuli.design import build_design, write_design
-    from stimuli.protocol import load_protocol
-    from stimuli.render.manifest import read_manifest
-    from stimuli.survey import export_all
+    import math
 
-    design = build_design(load_protocol(protocol_path))
-    missing = {s.stimulus_id for s in design.stimuli} - set(read_manifest(out_dir))
-    if missing or report.failed:
-        return [f"survey: not exported, {len(missing)} stimuli have no clip yet (render them all first)"]
-    write_design(design, out_dir)
-    return [f"survey: {r.format} → {r.path}" for r in export_all(out_dir, video_base_url=video_base_url)]
+    from stimuli.errors import StimuliError
+
+    try:
+        az, el, dist, fov = (float(x) for x in text.split(","))
+    except ValueError:
+        raise StimuliError(f"--camera: expected azimuth,elevation,distance,fov such as 35,10,4,40, got {text!r}") from None
+    if not all(math.isfinite(x) for x in (az, el, dist, fov)):
+        raise StimuliError(f"--camera: expected finite numbers, got {text!r}")
+    if not 0.5 < dist <= 50:
+        raise StimuliError(f"--camera {text}: distance {dist:g} m must lie in (0.5, 50] metres")
+    if not 5 < fov < 150:
+        raise StimuliError(f"--camera {text}: field of view {fov:g}° must lie between 5 and 150 degrees")
+    return az, el, dist, fov
+
+
+def check_preview_options(args: argparse.Namespace) -> None:
+    """Every option of ``preview`` in range and the output writable, before a body is fitted or a frame drawn."""
+    import math
+
+    from stimuli.commands.checks import positive
+    from stimuli.errors import StimuliError
+    from stimuli.fileio import check_output_file
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".mp4":
+        raise StimuliError(f"--out: expected a .mp4 file name, got {out}")
+    check_output_file(out)
+    check_output_file(out.with_suffix(".png"), "--out (its poster)")
+    positive("--duration", args.duration, "a duration > 0 seconds")
+    positive("--fps", args.fps, "a frame rate > 0")
+    if args.speed is not None and not (math.isfinite(args.speed) and args.speed >= 0):
+        raise StimuliError(f"--speed: expected a belt speed >= 0 m/s, got {args.speed}")
+    if args.duration * args.fps < 1:
+        raise StimuliError(f"--duration {args.duration:g} s at --fps {args.fps} gives no frame")
 
 
 def run_preview(args: argparse.Namespace) -> int:
+    from stimuli.commands.checks import parse_body
     from stimuli.render.preview import preview
+    from stimuli.render.settings import parse_resolution
 
-    path = preview(args)
-    print(path)
+    check_preview_options(args)
+    body = parse_body(args.body)
+    size, camera = parse_resolution(args.resolution), parse_camera(args.camera)
+    print(preview(args.out, body["sex"], body["height_m"], body["bmi"], layout=args.layout, size=size, fps=args.fps,
+                  duration_s=args.duration, camera=camera, belt_speed=args.speed, motion=args.motion, gait=args.gait))
     return 0

@@ -369,7 +369,7 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
             # the source's bend (near a straight knee 1 cm of hip-to-ankle distance is ~18° of knee).
             tgt, offsets, foot, planted, reach = rolls[s]
             hip = gpos[:, roles[f"{s}_hip"]] + (lowered - root)
-            late = roll_weight(contacts[s])
+            late = roll_weight(contacts[s], cyclic=cyclic)
             rolled, turned = roll_off(hip, tgt, offsets, foot, planted, src_len[s], late, reach)
             done = late > 0
             targets[s][done], feet[s][done] = rolled[done], turned[done]
@@ -394,53 +394,55 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     return out
 
 
-def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.5) -> np.ndarray:
+def _runs(contact: np.ndarray, cyclic: bool) -> tuple[int, list[tuple[int, int]]]:
+    """(shift, [start, stop) contact runs of ``contact`` rolled left by shift). On a loop
+    (``cyclic``) the roll starts in swing, so a contact across the clip's end is one run; otherwise
+    the clip's own order, where a contact cut by its end or start is a run of its own."""
+    shift = int(np.argmin(contact)) if cyclic and not contact.all() else 0
+    return shift, _intervals(np.roll(contact, -shift))
+
+
+def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.5, cyclic: bool = True) -> np.ndarray:
     """0…1 per frame: how flat a foot should be — ramps up over the first ``rise`` of each contact
     (heel strike → foot flat), holds, and ramps down after ``fall`` (heel rise before push-off)."""
     out = np.zeros(len(contact))
-    if not contact.any():
-        return out
-    shift = int(np.argmin(contact)) if not contact.all() else 0
-    c = np.roll(contact, -shift)
-    for s, e in _intervals(c):
+    shift, runs = _runs(contact, cyclic)
+    for s, e in runs:
         u = (np.arange(s, e) - s + 0.5) / (e - s)
         out[s:e] = np.clip(np.minimum(u / rise, (1.0 - u) / (1.0 - fall)), 0.0, 1.0)
     return np.roll(out, shift)
 
 
-def _contact_mean_yaw(yaw: np.ndarray, contact: np.ndarray) -> np.ndarray:
+def _contact_mean_yaw(yaw: np.ndarray, contact: np.ndarray, cyclic: bool = True) -> np.ndarray:
     """Heading per frame, constant (its circular mean) within each contact: a planted foot does
     not turn on the ground."""
-    out = yaw.copy()
-    shift = int(np.argmin(contact)) if not contact.all() else 0
-    c, y = np.roll(contact, -shift), np.roll(out, -shift)
-    for s, e in _intervals(c):
+    shift, runs = _runs(contact, cyclic)
+    y = np.roll(yaw, -shift)
+    for s, e in runs:
         y[s:e] = np.arctan2(np.sin(y[s:e]).mean(), np.cos(y[s:e]).mean())
     return np.roll(y, shift)
 
 
-def roll_weight(contact: np.ndarray, start: float = 0.5, full: float = 0.75) -> np.ndarray:
+def roll_weight(contact: np.ndarray, start: float = 0.5, full: float = 0.75, cyclic: bool = True) -> np.ndarray:
     """0…1 per frame: how far the late-stance roll-off (:func:`roll_off`) applies — 0 until
     ``start`` of each contact (where :func:`flat_weight` lets the heel rise), 1 from ``full`` on."""
     out = np.zeros(len(contact))
-    if not contact.any() or contact.all():
+    if contact.all():
         return out
-    shift = int(np.argmin(contact))
-    c = np.roll(contact, -shift)
-    for s, e in _intervals(c):
+    shift, runs = _runs(contact, cyclic)
+    for s, e in runs:
         u = (np.arange(s, e) - s + 0.5) / (e - s)
         out[s:e] = np.clip((u - start) / (full - start), 0.0, 1.0)
     return np.roll(out, shift)
 
 
-def early_stance(contact: np.ndarray) -> np.ndarray:
+def early_stance(contact: np.ndarray, cyclic: bool = True) -> np.ndarray:
     """Frames in the first half of each contact."""
     out = np.zeros(len(contact), bool)
-    if not contact.any() or contact.all():
+    if contact.all():
         return out
-    shift = int(np.argmin(contact))
-    c = np.roll(contact, -shift)
-    for s, e in _intervals(c):
+    shift, runs = _runs(contact, cyclic)
+    for s, e in runs:
         out[s:s + (e - s + 1) // 2] = True
     return np.roll(out, shift)
 
@@ -450,6 +452,7 @@ def flatten_feet(motion: Motion, rot: np.ndarray, root: np.ndarray, contacts: di
     """Turn planted feet flat on the ground (keeping their heading) during mid-stance.
 
     The rest pose stands flat, so a flat foot is a pure heading rotation of the rest orientation.
+    ``cyclic``: the clip loops, so a contact running over its last frame goes on at its first.
     """
     roles = role_indices(motion)
     out = rot.copy()
@@ -457,13 +460,14 @@ def flatten_feet(motion: Motion, rot: np.ndarray, root: np.ndarray, contacts: di
     for s in SIDES:
         ankle, parent = roles[f"{s}_ankle"], motion.parents[roles[f"{s}_ankle"]]
         fwd = quat.rotate(grot[:, ankle], np.array([0.0, 0.0, 1.0]))
-        yaw = _contact_mean_yaw(np.arctan2(fwd[:, 0], fwd[:, 2]), contacts[s])
+        yaw = _contact_mean_yaw(np.arctan2(fwd[:, 0], fwd[:, 2]), contacts[s], cyclic)
         flat = quat.from_axis_angle(np.stack([0 * yaw, yaw, 0 * yaw], -1))
-        want = quat.slerp(grot[:, ankle], flat, flat_weight(contacts[s]))
+        want = quat.slerp(grot[:, ankle], flat, flat_weight(contacts[s], cyclic=cyclic))
         # Before mid-stance the heel stays down: a foot pitching toes-down is laid flat instead
         # (otherwise the heel would lift and slide as the toes land).
-        toes_down = quat.rotate(want, np.array([0.0, 0.0, 1.0]))[:, 1] < 0
-        want[toes_down & early_stance(contacts[s])] = flat[toes_down & early_stance(contacts[s])]
+        early = quat.rotate(want, np.array([0.0, 0.0, 1.0]))[:, 1] < 0
+        early &= early_stance(contacts[s], cyclic)
+        want[early] = flat[early]
         out[:, ankle] = quat.mul(quat.inv(grot[:, parent]), want)
     return out
 
@@ -591,19 +595,4 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
                     lo, np.full(len(todo), np.radians(MAX_HEEL_RISE_DEG)))
     target[todo] = _turn_about(pivot, arm, axis, angle)
     foot[todo] = quat.mul(quat.from_axis_angle(axis * angle[:, None]), foot[todo])
-    return target, foot
-    arm = target[todo] - pivot[todo]
-    axis = np.cross(arm, np.array([0.0, 1.0, 0.0]))
-    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
-
-    def turned(angle):
-        return pivot[todo] + quat.rotate(quat.from_axis_angle(axis * angle[:, None]), arm)
-
-    lo, hi = np.zeros(len(todo)), np.full(len(todo), np.radians(MAX_HEEL_RISE_DEG))
-    for _ in range(30):  # bisection: the distance to the hip shrinks as the heel rises
-        mid = (lo + hi) / 2
-        far = np.linalg.norm(turned(mid) - hip[todo], axis=1) > reach
-        lo, hi = np.where(far, mid, lo), np.where(far, hi, mid)
-    target[todo] = turned(hi)
-    foot[todo] = quat.mul(quat.from_axis_angle(axis * hi[:, None]), foot[todo])
     return target, foot

@@ -54,6 +54,14 @@ for _s in ("l", "r"):
     TREE += [(f"{_s}_clavicle", "chest"), (f"{_s}_shoulder", f"{_s}_clavicle"), (f"{_s}_elbow", f"{_s}_shoulder"),
              (f"{_s}_wrist", f"{_s}_elbow"), (f"{_s}_hand_end", f"{_s}_wrist")]
 
+# The one set of bounds of a generated gait's cadence (steps/min) and belt speed (m/s): the
+# protocol's gaits, the CLI's --cadence/--speed and GaitParams all take these.
+CADENCE_RANGE_SPM = (40.0, 260.0)
+SPEED_RANGE_MPS = (0.2, 6.0)
+# Cadence (steps/min) and speed (m/s) of a gait when neither a protocol nor an option gives them
+# (the bundled protocols' values).
+DEFAULT_PACE = {"walk": (112.0, 1.2), "jog": (138.0, 2.2)}
+
 # Gait-specific defaults (walk: CGM2.3 normative; jog: Novacheck 1998 typical jogging values; the
 # jog's leg curves are already running ones, so its knee gains and hip offset are neutral).
 GAIT_DEFAULTS = {
@@ -103,10 +111,10 @@ class GaitParams:
             if values[k] is None:
                 values[k] = v
         out = GaitParams(**values)
-        if not 20 <= out.cadence_spm <= 260:
-            raise StimuliError(f"cadence_spm must be within 20–260 steps/min, got {out.cadence_spm}")
-        if not 0.0 <= out.speed_mps <= 8.0:
-            raise StimuliError(f"speed_mps must be within 0–8 m/s, got {out.speed_mps}")
+        for name, (low, high), unit in (("cadence_spm", CADENCE_RANGE_SPM, "steps/min"),
+                                        ("speed_mps", SPEED_RANGE_MPS, "m/s")):
+            if not low <= getattr(out, name) <= high:
+                raise StimuliError(f"{name} must be within {low:g}–{high:g} {unit}, got {getattr(out, name)}")
         if not 0.2 <= out.stance_fraction <= 0.8:
             raise StimuliError(f"stance_fraction must be within 0.2–0.8, got {out.stance_fraction}")
         return out

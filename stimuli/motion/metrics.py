@@ -65,8 +65,7 @@ def knee_angles(motion, positions=None) -> dict[str, np.ndarray]:
     return out
 
 
-def foot_contacts(sole: dict[str, np.ndarray], fps: float, belt_speed: float = 0.0,
-                  height: float = CONTACT_HEIGHT_M) -> dict[str, np.ndarray]:
+def foot_contacts(sole: dict[str, np.ndarray], height: float = CONTACT_HEIGHT_M) -> dict[str, np.ndarray]:
     """Per foot, frames whose lowest sole point is within ``height`` of the ground."""
     return {s: pts[:, :, 1].min(axis=1) <= height for s, pts in sole.items()}
 
@@ -91,7 +90,7 @@ def gait_metrics(motion, points: dict | None = None) -> dict:
     # where its rigid toes dip at push-off, 1–2 cm below the flat foot, and from y = 0 a CMU walk
     # read as 9 % stance and 82 % flight. Generated and retargeted clips stand at 0 (unchanged).
     level = {s: stance_level(sole[s][:, :, 1].min(axis=1), ev[f"{s}_hs"], ev[f"{s}_to"]) for s in ("l", "r")}
-    contact = foot_contacts({s: sole[s] - [0.0, level[s], 0.0] for s in sole}, rep.fps)
+    contact = foot_contacts({s: sole[s] - [0.0, level[s], 0.0] for s in sole})
     stance = 100.0 * np.mean([contact[s].mean() for s in ("l", "r")])
     both = 100.0 * float(np.mean(contact["l"] & contact["r"]))
     none = 100.0 * float(np.mean(~contact["l"] & ~contact["r"]))
@@ -143,7 +142,7 @@ def _inside(point: np.ndarray, pts: np.ndarray) -> bool:
     return bool(_MplPath(pts[hull.vertices]).contains_point(point, radius=1e-9))
 
 
-def zmp(com: np.ndarray, fps: float, belt_speed: float = 0.0) -> np.ndarray:
+def zmp(com: np.ndarray, fps: float) -> np.ndarray:
     """Zero-moment point (T×3, on y = 0) of a point-mass body from its CoM path (flat ground).
 
     x_zmp = x_G − y_G·a_x/(a_y + g), likewise z. On a treadmill the belt is an inertial frame too
@@ -173,7 +172,7 @@ def plausibility(sole: dict[str, np.ndarray], lowest_y: np.ndarray, com: np.ndar
     belt = np.array([0.0, 0.0, -belt_speed])
     dt = 1.0 / fps
     penetrate = 100.0 * float(np.mean(np.maximum(0.0, -lowest_y)))
-    contact = foot_contacts(sole, fps)
+    contact = foot_contacts(sole)
     skate_points = sole if skate_points is None else skate_points
     float_vals, skate_pairs = [], np.zeros(len(lowest_y) - 1, bool)
     for s, pts in skate_points.items():
@@ -200,7 +199,7 @@ def plausibility(sole: dict[str, np.ndarray], lowest_y: np.ndarray, com: np.ndar
         float_vals.append(np.where(planted, np.maximum(low[:, 1], 0.0), np.nan))
     fv = np.concatenate(float_vals)
     floating = 100.0 * float(np.nanmean(fv)) if np.isfinite(fv).any() else 0.0
-    z = zmp(com, fps, belt_speed)
+    z = zmp(com, fps)
     unstable = 0
     for t in range(len(com)):
         pts = []

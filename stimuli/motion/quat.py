@@ -1,7 +1,7 @@
 """Quaternion helpers on numpy arrays, w-first (the Motion ``.npz`` convention).
 
 Everything is vectorised over leading axes. scipy's ``Rotation`` (x, y, z, w order) does the
-Euler and matrix conversions; the hot paths (product, rotate a vector) are written here because
+Euler and axis-angle conversions; the hot paths (product, rotate a vector) are written here because
 they run per frame and per joint inside forward kinematics.
 
 Examples
@@ -103,18 +103,6 @@ def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     return to_scipy(q).as_euler(order.upper(), degrees=degrees).reshape(q.shape[:-1] + (3,))
 
 
-def to_matrix(q: np.ndarray) -> np.ndarray:
-    """3×3 rotation matrices, shape (..., 3, 3)."""
-    q = np.asarray(q, float)
-    return to_scipy(q).as_matrix().reshape(q.shape[:-1] + (3, 3))
-
-
-def from_matrix(m: np.ndarray) -> np.ndarray:
-    """Quaternions from 3×3 rotation matrices, shape (..., 4)."""
-    m = np.asarray(m, float)
-    return from_scipy(Rotation.from_matrix(m.reshape(-1, 3, 3)), m.shape[:-2])
-
-
 def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Smallest rotation taking direction ``u`` to direction ``v`` (both (..., 3))."""
     u = np.asarray(u, float)
@@ -132,15 +120,6 @@ def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         alt[small] = np.cross(u[small] if u.ndim > 1 else u, np.array([0.0, 1.0, 0.0]))
         q[opposite] = np.concatenate([np.zeros(alt.shape[:-1] + (1,)), alt], axis=-1)[opposite]
     return normalize(q)
-
-
-def from_frame(forward: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """Rotation whose +z axis points along ``forward`` and +y as close as possible to ``up``."""
-    z = forward / np.linalg.norm(forward, axis=-1, keepdims=True)
-    x = np.cross(up, z)
-    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
-    y = np.cross(z, x)
-    return from_matrix(np.stack([x, y, z], axis=-1))
 
 
 def unroll(q: np.ndarray, axis: int = 0) -> np.ndarray:

@@ -19,8 +19,9 @@ BONES = [("hips", "l_upper_leg"), ("hips", "r_upper_leg"), ("l_upper_leg", "l_kn
          ("l_elbow", "l_wrist"), ("r_elbow", "r_wrist")]
 
 
-def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, points: dict | None = None) -> Path:
-    """One row per motion (label → Motion), ``n`` poses of its first cycle, side view (z → right)."""
+def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, bodies: dict | None = None) -> Path:
+    """One row per motion (label → Motion), ``n`` poses of its first cycle, side view (z → right);
+    ``bodies`` (label → Body) for motions on a body's rig: its markers as a clip draws them."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,7 +31,7 @@ def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, points
     fig, axes = plt.subplots(rows, n, figsize=(1.4 * n, 2.4 * rows), squeeze=False)
     idx = {m: i for i, m in enumerate(MARKERS)}
     for r, (label, motion) in enumerate(motions.items()):
-        tr = marker_trajectories(motion, (points or {}).get(label))
+        tr = marker_trajectories(motion, (bodies or {}).get(label))
         cycles = int(motion.metadata.get("cycles", 1)) or 1
         frames = np.linspace(0, motion.n_frames / cycles, n, endpoint=False).astype(int)
         for c, f in enumerate(frames):
@@ -60,27 +61,23 @@ def frame_strip(motions: dict[str, object], path: str | Path, n: int = 8, points
 def protocol_strips(protocol_path: str | Path, out_dir: str | Path, frames: int = 8, on_bodies: bool = True) -> list[Path]:
     """A strip per actor and gait of a protocol (generated motion, retargeted onto the actor's
     fitted Anny body when ``on_bodies``), plus one overview per gait with every actor."""
-    from stimuli.motion.generate import generate
-    from stimuli.motion.style import params_for_actor
+    from stimuli.motion.style import actor_gait
     from stimuli.protocol import load_protocol
 
     proto = load_protocol(protocol_path)
     out_dir = Path(out_dir)
     written = []
     for gait, spec in proto.gaits.items():
-        rows, pts = {}, {}
+        rows, bodies = {}, {}
         for a in proto.actors:
-            extra = {k: getattr(a, k) for k in ("waist_m", "hip_m", "chest_m", "body_fat_pct") if getattr(a, k, None)}
-            m = generate(params_for_actor(a.id, a.height_m, a.bmi, a.sex, gait, spec.cadence_spm, spec.speed_mps,
-                                          seed=proto.seed, **extra), a.height_m)
+            m = actor_gait(a, gait, spec.cadence_spm, spec.speed_mps, proto.seed, fps=30.0, cycles=2)
             label = f"{a.id} {gait}"
             if on_bodies:
                 from stimuli.bodies import body_for_actor
-                from stimuli.motion.retarget import mesh_sole_points, retarget
-                body = body_for_actor(a)
-                m = retarget(m, body)
-                pts[label] = mesh_sole_points(body)
+                from stimuli.motion.retarget import retarget
+                bodies[label] = body_for_actor(a)
+                m = retarget(m, bodies[label])
             rows[label] = m
-            written.append(frame_strip({label: m}, out_dir / f"strip_{a.id}_{gait}.png", frames, pts))
-        written.append(frame_strip(rows, out_dir / f"strips_{gait}.png", frames, pts))
+            written.append(frame_strip({label: m}, out_dir / f"strip_{a.id}_{gait}.png", frames, bodies))
+        written.append(frame_strip(rows, out_dir / f"strips_{gait}.png", frames, bodies))
     return written

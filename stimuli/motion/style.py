@@ -72,15 +72,18 @@ def params_for_actor(actor_id: str, height_m: float, bmi: float, sex: str, gait:
     return p
 
 
-def actor_gait(actor, gait: str, cadence_spm: float, speed_mps: float | None, seed: int, fps: float, cycles: int):
+def actor_gait(actor, gait: str, cadence_spm: float, speed_mps: float | None, seed: int, fps: float, cycles: int,
+               style: bool = True):
     """An actor's own looped treadmill walk or jog from the generator (protocol cadence and speed,
-    the actor's anthropometric trends and individual style): the motion Exp 1's MOTION factor shows.
+    the actor's anthropometric trends and, unless ``style`` is False, individual style): the motion
+    Exp 1's MOTION factor shows.
 
-    ``actor`` is a :class:`stimuli.protocol.Actor` (or anything with its fields).
+    ``actor`` is a :class:`stimuli.protocol.Actor` (or anything with its fields: ``id``, ``sex``,
+    ``height_m``, ``bmi``, optional girths and body fat).
     """
     from stimuli.motion.generate import generate
 
     anthro = {k: getattr(actor, k) for k in ("body_fat_pct", "waist_m", "hip_m", "chest_m") if getattr(actor, k, None)}
     params = params_for_actor(actor.id, actor.height_m, actor.bmi, actor.sex, gait, cadence_spm, speed_mps,
-                              seed=seed, **anthro)
+                              seed=seed, style=style, **anthro)
     return generate(params, height_m=actor.height_m, fps=fps, cycles=cycles)

@@ -103,7 +103,8 @@ def apply_pose(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def render_frames(look: Look, figures: list[Figure]):
     """Yield the clip's frames, (H, W, 3) uint8, exactly ``look.n_frames`` of them."""
-    from stimuli.render.pointlight import DotFigure, marker_positions
+    from stimuli.motion.markers import body_markers
+    from stimuli.render.pointlight import DotFigure
     from stimuli.render.treadmill import Treadmill, belt_period
 
     if look.layout not in LAYOUTS:
@@ -132,7 +133,7 @@ def render_frames(look: Look, figures: list[Figure]):
         stage.scene.remove_node(floor)
     stage.make_transparent()
     if dots:
-        animated = [DotFigure(stage, apply_pose(p, marker_positions(f.body, f.rotations, r)))
+        animated = [DotFigure(stage, apply_pose(p, body_markers(f.body, f.rotations, r)))
                     for f, r, p in zip(figures, roots, poses)]
     else:
         animated = [_SkinnedFigure(stage, f, r, p) for f, r, p in zip(figures, roots, poses)]

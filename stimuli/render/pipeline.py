@@ -43,6 +43,7 @@ class RenderReport:
     failed: dict[str, str] = field(default_factory=dict)
     contact_sheet: Path | None = None
     warnings: list[str] = field(default_factory=list)
+    design: object = None  # the stimuli.design.Design rendered (for the survey exports)
 
     def summary(self) -> str:
         return (f"{len(self.rendered)} rendered, {len(self.skipped)} unchanged, {len(self.failed)} not renderable"
@@ -57,8 +58,8 @@ def select(stimuli: list, only: str | list[str] | None, limit: int | None) -> li
         if not stimuli:
             raise StimuliError(f"--only: no stimulus id contains any of {wanted}")
     if limit is not None:
-        if limit < 0:
-            raise StimuliError(f"--limit: expected a number of clips >= 0, got {limit}")
+        if limit < 1:
+            raise StimuliError(f"--limit: expected a whole number >= 1, got {limit}")
         stimuli = stimuli[:limit]
     return stimuli
 
@@ -74,6 +75,19 @@ def plan(protocol, stimuli, out_dir: Path, resolution=None, fps=None, quick=Fals
         jobs.append(Job(s, look, digest, out_dir / "clips" / f"{s.stimulus_id}.mp4",
                         out_dir / "posters" / f"{s.stimulus_id}.png"))
     return jobs
+
+
+def _check_motions_dir(protocol, motions_dir, where) -> None:
+    """``motions_dir`` (the physics step's folder) only for a protocol that reads it, and present."""
+    if motions_dir is None:
+        return
+    alternatives = protocol.factors_with_role("alternatives")
+    if not alternatives or alternatives[0].maps_to != "method":
+        raise StimuliError(f"--motions {motions_dir}: {where} has no METHOD factor (maps_to: method), so it reads "
+                           "no motions of 'shapemotion physics protocol'; leave --motions out")
+    if not Path(motions_dir).is_dir():
+        raise StimuliError(f"--motions {motions_dir}: folder not found (the --out folder of 'shapemotion physics "
+                           "protocol')")
 
 
 def check_frames(protocol, fps: int | None, source: str = "protocol") -> None:
@@ -139,13 +153,15 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     if source not in SOURCES:
         raise StimuliError(f"--poses: expected one of {', '.join(SOURCES)}, got {source!r}")
     protocol = load_protocol(protocol_path)
+    _check_motions_dir(protocol, motions_dir, protocol_path)
     out_dir = Path(out_dir)
     design = build_design(protocol)
     order = [s.stimulus_id for s in design.stimuli]
     jobs = plan(protocol, select(design.stimuli, only, limit), out_dir, resolution, fps, quick, motions_dir, source)
     check_frames(protocol, jobs[0].look.fps if jobs else None, source)
     previous = read_manifest(out_dir)
-    report = RenderReport(out_dir, warnings=cadence_warnings(protocol, jobs[0].look.fps if jobs else None))
+    report = RenderReport(out_dir, warnings=cadence_warnings(protocol, jobs[0].look.fps if jobs else None),
+                          design=design)
     for line in report.warnings if warn else ():
         warn(line)
     rows = {sid: with_all_columns(row) for sid, row in previous.items()
@@ -180,6 +196,23 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     if report.failed and strict:
         raise StimuliError(_failure_message(protocol, report))
     return report
+
+
+def export_survey(report: RenderReport, video_base_url=None) -> tuple[list[str], list | None]:
+    """Make a render folder a complete survey source: the design files and every survey export.
+
+    Only when every stimulus of the report's design has its clip (a ``limit``/``only`` render is
+    partial, and a survey pointing at missing clips would be wrong). Returns the stimulus ids without
+    a clip and the exports written (``stimuli.survey.ExportResult`` s; None: nothing written).
+    """
+    from stimuli.design import write_design
+    from stimuli.survey import export_all
+
+    missing = sorted({s.stimulus_id for s in report.design.stimuli} - set(read_manifest(report.out_dir)))
+    if missing or report.failed:
+        return missing, None
+    write_design(report.design, report.out_dir)
+    return [], export_all(report.out_dir, video_base_url=video_base_url)
 
 
 def _update_manifest(out_dir: Path, rows: list[dict]) -> Path | None:

@@ -167,8 +167,7 @@ def _method_file(protocol, method: str, stimulus, gait: str, sex: str) -> str:
     folder: the average (NoCOM) or the physics (COM) motion, as the level's setting says."""
     from stimuli.protocol import method_motion_of
 
-    factor = protocol.factor_mapped_to("method")
-    kind = method_motion_of(factor, method) if factor is not None else ("average" if method == "NoCOM" else "physics")
+    kind = method_motion_of(protocol.factor_mapped_to("method"), method)
     return f"nocom/{sex}_{gait}.npz" if kind == "average" else f"motions/COM_{stimulus.body_actor}_{gait}.npz"
 
 
@@ -198,8 +197,6 @@ def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, 
     """
     from pathlib import Path
 
-    from stimuli.motion import Motion
-
     sex = body.sex
     if motions_dir is None:
         # One message for every level: each clip fails on the same missing folder.
@@ -211,9 +208,20 @@ def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, 
     if not path.is_file():
         raise MissingSource(f"--motions {motions_dir}: {name} not found (METHOD = {method}, body "
                             f"{stimulus.body_actor}, {gait}); run 'shapemotion physics protocol' into that folder")
-    on_body = on_rig(Motion.load(path), body)
+    actor = next(a for a in protocol.actors if a.id == stimulus.body_actor)
+    stat = path.stat()
+    on_body = _loaded_on_body(str(path.resolve()), stat.st_mtime_ns, stat.st_size, actor.model_dump_json())
     rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps,
                                  look.loop)
     spec = protocol.gaits.get(gait)
     speed = float(on_body.metadata.get("belt_speed_mps", spec.speed_mps if spec else 0.0)) * scale
     return rot, root, speed
+
+
+@functools.lru_cache(maxsize=32)
+def _loaded_on_body(path: str, mtime_ns: int, size: int, actor_json: str):
+    """A motion file retargeted onto an actor's body (cached per process: Exp 2's NoCOM_COM and
+    COM_NoCOM clips of a condition show the same two; the file's time and size key a rewritten file)."""
+    from stimuli.motion import Motion
+
+    return on_rig(Motion.load(path), _body(actor_json))
