@@ -15,13 +15,13 @@ import time
 
 def main() -> None:
     from stimuli.bodies import fit_body
-    from stimuli.motion.generate import GaitParams, generate
+    from stimuli.motion.generate import DEFAULT_PACE, GaitParams, generate
     from stimuli.physics import retarget
 
     body = fit_body("M", 1.83, 35.8)
     reference = fit_body("M", 1.81, 28.1)
     print(f"{'gait':<6}{'simulated_s':>12}{'wall_s':>9}{'wall/sim':>10}{'rate_hz':>9}{'end_to_end_s':>14}")
-    for gait, cadence, speed in (("walk", 112, 1.2), ("jog", 138, 2.2)):
+    for gait, (cadence, speed) in DEFAULT_PACE.items():
         motion = generate(GaitParams(gait=gait, cadence_spm=cadence, speed_mps=speed), height_m=1.81, fps=30, cycles=2)
         start = time.perf_counter()
         rep = retarget(motion, body, 119.9, reference_body=reference).report
