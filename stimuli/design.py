@@ -19,7 +19,12 @@ Counterbalancing rules (all seeded, so the same protocol + seed gives the same l
   the pool first when it asks for more (copies numbered repetition 2, 3, …);
 - side-by-side/row placement of an ``alternatives`` factor: ``within`` shows every arrangement to
   everyone; ``between`` rotates arrangements over participants so every position is balanced;
-- trial order within a block is random with no stimulus twice in a row (when that is possible).
+- test trial order within a block (``blocks.trials``): ``random`` (the default) shuffles per participant
+  with no stimulus twice in a row (when that is possible); ``fixed`` keeps the declared order of the
+  factor levels (``test_stimuli``'s order: the first-declared factor varies slowest, screen
+  arrangements last) for everyone, the whole sequence once per repetition (repetition 1 of every
+  clip, then repetition 2, …), so a clip never follows itself unless a block has one clip only,
+  which the protocol refuses when ``repetitions`` > 1. Practice and familiarisation keep their rules.
 """
 
 from __future__ import annotations
@@ -342,8 +347,8 @@ def _participant_trials(protocol, participant, rank, groups, blocks, tests, prac
             block_tests = [s for s in block_tests
                            if arrangements(protocol).index(s.arrangement)
                            == (rank + conditions.index(s.condition_id)) % n_arrangements]
-        ids = [s.stimulus_id for s in block_tests] * protocol.repetitions
-        for sid, repetition in _numbered(shuffle_no_repeats(ids, rng)):
+        ids = [s.stimulus_id for s in block_tests] * protocol.repetitions   # declared order, once per repetition
+        for sid, repetition in _numbered(ids if protocol.blocks.trials == "fixed" else shuffle_no_repeats(ids, rng)):
             add(sid, position, repetition, "test")
     return trials
 

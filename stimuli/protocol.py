@@ -32,6 +32,10 @@ MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "paramet
 SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 # The human ranges of a body (metres, kg/m²): the protocol's actors and the CLI's --height/--bmi/girths.
 HEIGHT_RANGE_M = (1.2, 2.3)
+# A gait's cadence (steps/min) and belt speed (m/s): the protocol's gaits, the generator's
+# GaitParams and the CLI's --cadence/--speed all take these.
+CADENCE_RANGE_SPM = (40.0, 260.0)
+SPEED_RANGE_MPS = (0.2, 6.0)
 BMI_RANGE = (13.0, 60.0)
 GIRTH_RANGES_M = {"waist_m": (0.4, 2.0), "hip_m": (0.5, 2.0), "chest_m": (0.5, 2.0)}
 BODY_FAT_RANGE_PCT = (0.0, 70.0)
@@ -180,8 +184,8 @@ def _check_strength_levels(factor: "Factor") -> None:
 
 
 class GaitSpec(Strict):
-    cadence_spm: float = Field(gt=40, lt=260, description="steps per minute")
-    speed_mps: float = Field(gt=0.2, lt=6.0, description="belt speed in m/s")
+    cadence_spm: float = Field(gt=CADENCE_RANGE_SPM[0], lt=CADENCE_RANGE_SPM[1], description="steps per minute")
+    speed_mps: float = Field(gt=SPEED_RANGE_MPS[0], lt=SPEED_RANGE_MPS[1], description="belt speed in m/s")
 
 
 class Camera(Strict):
@@ -246,14 +250,19 @@ class Alternatives(Strict):
 
 
 class Blocks(Strict):
-    """Which within factors define blocks, and how block order varies over participants.
+    """Which within factors define blocks, how block order varies over participants, and the order
+    of the test trials inside a block.
 
-    ``counterbalanced`` (alias ``latin_square``): rows of a Williams Latin square dealt out evenly;
-    ``random``: a fresh random order per participant; ``fixed``: the declared order for everyone.
+    ``order`` — ``counterbalanced`` (alias ``latin_square``): rows of a Williams Latin square dealt
+    out evenly; ``random``: a fresh random order per participant; ``fixed``: the declared order for
+    everyone. ``trials`` — ``random``: the block's test trials shuffled per participant, never the
+    same clip twice in a row; ``fixed``: the declared order of the factor levels for everyone (the
+    first-declared factor varying slowest), the whole sequence once per repetition.
     """
 
     by: list[str] = []
     order: Literal["counterbalanced", "latin_square", "random", "fixed"] = "counterbalanced"
+    trials: Literal["random", "fixed"] = "random"
 
 
 class Practice(Strict):
@@ -354,7 +363,10 @@ class Protocol(Strict):
         return matches[0]
 
     def to_json_dict(self) -> dict:
-        return json.loads(self.model_dump_json())
+        data = json.loads(self.model_dump_json())
+        if self.blocks.trials == "random":   # the default: left out, so that designs written before
+            del data["blocks"]["trials"]     # blocks.trials existed stay byte-identical
+        return data
 
 
 def check_consistency(p: Protocol) -> None:
@@ -382,6 +394,7 @@ def check_consistency(p: Protocol) -> None:
             raise ValueError(f"blocks.by: unknown factor {name!r} (factors: {names})")
         if p.factor(name).role != "within":
             raise ValueError(f"blocks.by: {name} is a {p.factor(name).role} factor; blocks must be within factors")
+    _check_trial_order(p)
     _check_alternatives_motion(p)
     _check_measure(p)
     _check_clip_timing(p)
@@ -445,6 +458,35 @@ def _check_practice_pool(p: Protocol) -> None:
                          f"1 distinct practice clip ({shown}), which would play {wanted} times back to back; use "
                          "per_block: 1 or add practice levels (with 2 or more clips a block may repeat them, never "
                          "twice in a row)")
+
+
+def _test_clips_per_block(p: Protocol) -> int:
+    """Distinct test clips one participant sees in one block: the crossing of the within factors that
+    do not define blocks, times the screen arrangements when every participant sees every one."""
+    count = 1
+    for f in p.factors_with_role("within"):
+        if f.name not in p.blocks.by:
+            count *= len(f.levels)
+    alternatives = p.factors_with_role("alternatives")
+    if alternatives and p.alternatives.counterbalance == "within":
+        from stimuli.design import arrangements
+
+        count *= len(arrangements(p))
+    return count
+
+
+def _check_trial_order(p: Protocol) -> None:
+    """``blocks.trials: fixed`` shows a block's test clips in declared order, the whole sequence once
+    per repetition: a block of one clip would play it back to back, which a fixed order cannot avoid."""
+    if p.blocks.trials != "fixed" or p.repetitions == 1:
+        return
+    clips = _test_clips_per_block(p)
+    if clips == 1:
+        more = " (fewer factors in blocks.by)" if p.blocks.by else ""
+        raise ValueError(f"blocks.trials: fixed shows a block's test clips in the declared order once per repetition, "
+                         f"but each block shows a participant only 1 test clip, which would play {p.repetitions} "
+                         f"times back to back (repetitions: {p.repetitions}); use repetitions: 1, or give each "
+                         f"block more than one test clip{more}")
 
 
 def _check_alternatives_motion(p: Protocol) -> None:

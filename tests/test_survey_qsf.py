@@ -199,7 +199,7 @@ def test_rotations_reproduce_the_latin_square_of_the_design(qsfs, folders):
     assert len(tests) == 6
     seen = Counter()
     for block in tests:
-        tags = [by_qid[e["QuestionID"]]["DataExportTag"] for e in block["BlockElements"]]
+        tags = [by_qid[e["QuestionID"]]["DataExportTag"] for e in block["BlockElements"] if e["Type"] == "Question"]
         conditions = [source.stimulus(t).condition_id for t in tags]
         assert sorted(conditions) == sorted(set(conditions)) and len(conditions) == 10
         seen.update(tags)
@@ -208,7 +208,8 @@ def test_rotations_reproduce_the_latin_square_of_the_design(qsfs, folders):
     lists = {}
     for t in source.trials:
         lists.setdefault(t["participant"], set()).add(t["stimulus_id"])
-    block_sets = [{by_qid[e["QuestionID"]]["DataExportTag"] for e in b["BlockElements"]} for b in tests]
+    block_sets = [{by_qid[e["QuestionID"]]["DataExportTag"] for e in b["BlockElements"] if e["Type"] == "Question"}
+                  for b in tests]
     assert all(s in block_sets for s in lists.values())
 
 
@@ -276,7 +277,7 @@ def test_practice_draws_per_block_from_the_pool(tmp_path, per_block, questions_p
     practice = [b for b in blocks(qsf).values() if b["Description"].endswith(" practice")]
     assert len(practice) == 4
     for block in practice:
-        tags = [by_qid[e["QuestionID"]]["DataExportTag"] for e in block["BlockElements"]]
+        tags = [by_qid[e["QuestionID"]]["DataExportTag"] for e in block["BlockElements"] if e["Type"] == "Question"]
         assert len(tags) == questions_per_block and len(set(tags)) == len(tags)
         assert all(t.startswith("practice-") for t in tags)
         assert all(t.endswith(("_r1", "_r2")) for t in tags) == (per_block > 4)

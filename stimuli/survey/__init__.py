@@ -77,6 +77,10 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
         from stimuli.survey.psychopy import write_psychopy
 
         write_psychopy(source, out)
+        if source.protocol.blocks.trials == "fixed":
+            result.notes.append("blocks.trials is fixed: set each test loop's loopType to sequential (blocks.csv "
+                                "column test_loop), so that every participant sees the test clips in the listed "
+                                "order, once per repetition")
     return result
 
 

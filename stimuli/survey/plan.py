@@ -9,7 +9,8 @@ time. This module states what they randomise over, with the same rules as :mod:`
   design's rule, with ``r`` the participant's rank in the group);
 - each rotation holds the protocol's **blocks** in declared order, each with its familiarisation
   clips (in the design's order), its practice pool (and how many to draw) and its test questions
-  (every test stimulus × repetition).
+  (every test stimulus × repetition, repetition by repetition in declared order: the design's own
+  order when ``blocks.trials`` is ``fixed``, which the exports then keep).
 """
 
 from __future__ import annotations

@@ -4,8 +4,11 @@ Written into one folder::
 
     blocks.csv                       outer loop: one row per block (declared order) with the names of
                                      its conditions files; set the loop to random/sequential per protocol
-    conditions/<block>_test.csv      one row per test stimulus (set the inner loop's nReps to
-                                     ``repetitions`` and its type to random)
+    conditions/<block>_test.csv      one row per test stimulus, in declared order (set the inner loop's
+                                     nReps to ``repetitions`` and its type to random, or — with
+                                     ``blocks.trials: fixed``, when blocks.csv has ``test_loop`` =
+                                     ``sequential`` — to sequential, which shows the rows in order once
+                                     per repetition, as the design does)
     conditions/<block>_practice.csv  the practice pool (draw ``practice_per_block`` rows)
     conditions/<block>_familiarization.csv   the familiarisation clips, in order (sequential loop)
     trials.csv                       every participant's seeded trial list with its movie file, for a
@@ -60,6 +63,8 @@ def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, st
                 entry |= {"block_label": block.label, "nReps": p.repetitions,
                           "test_file": f"conditions/{stem}_test.csv", "practice_file": "",
                           "practice_per_block": block.practice_count, "familiarization_file": ""}
+                if p.blocks.trials == "fixed":   # the test loop's loopType (only then: other files stay as they were)
+                    entry["test_loop"] = "sequential"
                 tests = [s for s, rep in block.tests if rep == 1]
                 files[entry["test_file"]] = csv_text([_row(source, s, movie_prefix) for s in tests])
                 if block.practice_count:

@@ -9,7 +9,8 @@ consent → instructions → *BlockRandomizer* (one of the between groups, ``Eve
 sets the group's embedded data) → [*BlockRandomizer* over arrangement rotations] → the blocks
 (a *BlockRandomizer* over them when the order is random or counterbalanced), each a *Group* of
 familiarisation page(s), practice intro + practice questions, and the test questions (one per page,
-in random order; every stimulus ``repetitions`` times) → end.
+in random order — or, with ``blocks.trials: fixed``, in the design's fixed order with question
+randomisation off; every stimulus ``repetitions`` times) → end.
 
 IDs are derived from the protocol name, so the same design gives a byte-identical file.
 """
@@ -186,7 +187,8 @@ def _block_flow(b: QsfBuilder, plan: GroupPlan, block: BlockPlan, tag: str) -> l
                                block.practice_count)
         flow += [b.block_ref(intro), b.block_ref(practice)]
     qids = [b.add_video_question(export_tag(s.stimulus_id, rep, repetitions), s) for s, rep in block.tests]
-    flow.append(b.block_ref(b.add_block(f"{name} test", qids, "RandomWithXPerPage")))
+    order = "false" if b.protocol.blocks.trials == "fixed" else "RandomWithXPerPage"   # false: as listed, a page each
+    flow.append(b.block_ref(b.add_block(f"{name} test", qids, order)))
     return flow
 
 

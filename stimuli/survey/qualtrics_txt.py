@@ -4,6 +4,11 @@ The format carries blocks, page breaks, questions (``[[ID:…]]`` sets the expor
 embedded data (``[[ED:field:value]]``), but no survey flow, randomisation or JavaScript. Those are
 listed by :func:`manual_steps` (the CLI prints them) and must be set by hand after the import.
 
+The questions of a block are imported in the order written, one per page, and the format has no way
+to randomise them: that takes a manual step (random test order), while ``blocks.trials: fixed``
+needs none — the test questions are written in the design's fixed order (every clip once per
+repetition), and question randomisation must simply stay off.
+
 The blocks are written group by group (and rotation by rotation), as in the QSF file; a ranking is
 written as a matrix (items × rank) because the format has no rank-order question — its export columns
 (``<tag>_1`` … ``<tag>_k`` = rank of the clip at each position) match a rank-order question's.
@@ -113,8 +118,12 @@ def manual_steps(source: SurveySource) -> list[str]:
         steps.append(f"Survey flow: put each part's blocks (familiarization, practice, test) in a Group and add a "
                      f"Randomizer presenting all {len(plans[0].rotations[0].blocks)} Groups, evenly "
                      f"(block order: {p.blocks.order}).")
-    steps.append("Each 'test' block: Block Options > Question Randomization > 'Randomly present … questions "
-                 "per page' with 1 question per page (order is random within the block).")
+    if p.blocks.trials == "fixed":
+        steps.append("Each 'test' block: leave Block Options > Question Randomization off (blocks.trials: fixed: "
+                     "the questions are imported in the protocol's fixed order, one per page).")
+    else:
+        steps.append("Each 'test' block: Block Options > Question Randomization > 'Randomly present … questions "
+                     "per page' with 1 question per page (order is random within the block).")
     if any(b.practice_count for g in plans for r in g.rotations for b in r.blocks):
         steps.append("Each 'practice' block: Question Randomization > random order, one question per page "
                      f"(present {p.practice.per_block} of them).")
