@@ -173,7 +173,7 @@ def run_generate(args: argparse.Namespace) -> int:
 def _check_generate(args: argparse.Namespace) -> None:
     """Options of ``motion generate``: numbers in range, and the body from the options or from
     --protocol/--actor, never a mix of both (one of them would be silently ignored)."""
-    from stimuli.motion.generate import CADENCE_RANGE_SPM, SPEED_RANGE_MPS
+    from stimuli.protocol import CADENCE_RANGE_SPM, SPEED_RANGE_MPS
 
     _check_npz_out(args.out)
     check_output_file(args.bvh, "--bvh")

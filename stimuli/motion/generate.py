@@ -34,6 +34,7 @@ from stimuli.motion.footfix import clean_feet, contact_targets, flatten_feet, so
 from stimuli.motion.motion import Motion
 from stimuli.motion.normative import TOE_OFF, curve
 from stimuli.motion.running import run_curve, run_toe_off
+from stimuli.protocol import CADENCE_RANGE_SPM, SPEED_RANGE_MPS
 
 GRAVITY = 9.81
 # The hip flexion amplitude is fitted to the planted foot's travel within this multiple of the
@@ -54,10 +55,6 @@ for _s in ("l", "r"):
     TREE += [(f"{_s}_clavicle", "chest"), (f"{_s}_shoulder", f"{_s}_clavicle"), (f"{_s}_elbow", f"{_s}_shoulder"),
              (f"{_s}_wrist", f"{_s}_elbow"), (f"{_s}_hand_end", f"{_s}_wrist")]
 
-# The one set of bounds of a generated gait's cadence (steps/min) and belt speed (m/s): the
-# protocol's gaits, the CLI's --cadence/--speed and GaitParams all take these.
-CADENCE_RANGE_SPM = (40.0, 260.0)
-SPEED_RANGE_MPS = (0.2, 6.0)
 # Cadence (steps/min) and speed (m/s) of a gait when neither a protocol nor an option gives them
 # (the bundled protocols' values).
 DEFAULT_PACE = {"walk": (112.0, 1.2), "jog": (138.0, 2.2)}
