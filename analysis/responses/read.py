@@ -12,6 +12,8 @@ raises :class:`~analysis.errors.AnalysisError` naming the file and what was expe
 
 from __future__ import annotations
 
+import math
+
 import csv
 import io
 import json
@@ -214,3 +216,22 @@ def _participant_column(columns: list[str]) -> str | None:
     """The first column that names participants (``participant``, ``PROLIFIC_PID``, …)."""
     lower = {c.lower(): c for c in columns}
     return next((lower[c.lower()] for c in PARTICIPANT_COLUMNS if c.lower() in lower), None)
+
+
+def cell_text(value) -> str:
+    """A cell as stripped text: "" for missing/NaN, whole floats without ".0"."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return str(value).strip()
+
+
+def cell_number(value) -> float | None:
+    """A cell as a number (None when it is not one)."""
+    text = cell_text(value)
+    try:
+        number = float(text)
+    except ValueError:
+        return None
+    return None if math.isnan(number) else number
