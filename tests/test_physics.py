@@ -532,3 +532,36 @@ def test_cli_retarget_names_a_bad_metadata_field(run_cli, walk, tmp_path, field,
                            "--weight", "63", "--out", tmp_path / "com.npz")
     assert code == 2 and "Traceback" not in err and message in " ".join(err.split()), err
     assert not (tmp_path / "com.npz").exists()
+
+
+def test_cli_retarget_options_override_bad_metadata(run_cli, walk, tmp_path):
+    """The error for unreadable metadata suggests --reference-height/--reference-weight; given, they are used
+    (the metadata was checked before the options were consulted)."""
+    bad = walk.replace()
+    bad.metadata.update({"height_m": "1.62", "weight_kg": "heavy"})
+    bad.save(tmp_path / "walk.npz")
+    code, _, err = run_cli("physics", "retarget", "--motion", tmp_path / "walk.npz", "--sex", "F", "--height", "1.61",
+                           "--weight", "63", "--reference-height", "1.62", "--reference-weight", "63",
+                           "--out", tmp_path / "com.npz")
+    assert code == 0 and "metadata" not in err, err
+
+
+def test_protocol_step_checks_every_reference_body_before_writing(protocol_path, walk, tmp_path):
+    """A --motions file in centimetres, or one of the other sex, is refused naming the file before any output
+    (it failed inside the workers naming no file, and left nocom/ motions/ reports/ behind)."""
+    from stimuli.physics.protocol_step import run_protocol
+
+    for name, meta, message in [("cm", {"height_m": 162.0, "bmi": 24.0, "sex": "F"}, "metadata height_m is 162"),
+                                ("sex", {"height_m": 1.62, "bmi": 24.0, "sex": "M"},
+                                 "metadata sex is 'M', but this file is the NoCOM motion of sex F")]:
+        folder = tmp_path / name
+        folder.mkdir()
+        for sex in "FM":
+            for gait in ("walk", "jog"):
+                m = walk.replace()
+                m.metadata.update(meta if sex == "F" and gait == "jog" else {"height_m": 1.7, "bmi": 24.0, "sex": sex},
+                                  gait=gait)
+                m.save(folder / f"{sex}_{gait}.npz")
+        with pytest.raises(StimuliError, match=message) as err:
+            run_protocol(protocol_path("exp2_com_vs_average"), tmp_path / f"out_{name}", motions_dir=folder)
+        assert "F_jog.npz" in str(err.value) and not (tmp_path / f"out_{name}").exists()

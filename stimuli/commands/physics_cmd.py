@@ -80,7 +80,10 @@ def _reference(args, motion) -> tuple[float, float, str, str]:
     COM change is measured against it)."""
     from stimuli.physics.own_body import own_body
 
-    own = own_body(motion, args.motion, hint=", or give the reference body with --reference-height/--reference-weight")
+    given = (("height_m",) if args.reference_height is not None else ()) + \
+        (("weight_kg", "bmi") if args.reference_weight is not None else ())
+    own = own_body(motion, args.motion, hint=", or give the reference body with --reference-height/--reference-weight",
+                   skip=given)
     height, h_from = args.reference_height, "--reference-height"
     if height is None and own.height_m is not None:
         height, h_from = own.height_m, f"{args.motion}: metadata height_m"
@@ -90,6 +93,10 @@ def _reference(args, motion) -> tuple[float, float, str, str]:
         return float(height), float(args.reference_weight), h_from, "--reference-weight"
     weight = own.weight_at(float(height))
     if weight is not None:
+        if h_from == "--height":
+            print(f"warning: {args.motion} records its body's {weight[1]} but no height_m, so the target's "
+                  f"{args.height:g} m is taken as the reference height; give --reference-height for the "
+                  "motion's own body", file=sys.stderr)
         return float(height), weight[0], h_from, f"{args.motion}: metadata {weight[1]}"
     print(f"warning: {args.motion} records no weight or BMI of its own body, so the target's "
           f"{args.weight:g} kg is taken as the reference weight"

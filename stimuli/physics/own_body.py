@@ -35,11 +35,12 @@ class OwnBody:
         return None
 
 
-def own_body(motion, where, hint: str = "") -> OwnBody:
+def own_body(motion, where, hint: str = "", skip: tuple[str, ...] = ()) -> OwnBody:
     """The body ``motion``'s metadata records (``height_m``, ``weight_kg``, ``bmi``, ``sex``).
 
     A figure that is not a finite number is an error naming ``where`` (the motion's file), the
-    field and the unit, followed by ``hint`` (how the caller lets the user give the body instead).
+    field and the unit, followed by ``hint`` (how the caller lets the user give the body instead);
+    the fields in ``skip`` (given by the user instead) are neither read nor checked.
     A sex other than F or M is returned as recorded, for the caller to report.
 
     >>> from types import SimpleNamespace
@@ -47,7 +48,7 @@ def own_body(motion, where, hint: str = "") -> OwnBody:
     OwnBody(height_m=1.7, weight_kg=None, bmi=24.0, sex='M')
     """
     meta = motion.metadata
-    numbers = {field: _number(meta.get(field), where, field, unit, hint)
+    numbers = {field: None if field in skip else _number(meta.get(field), where, field, unit, hint)
                for field, unit in (("height_m", "metres"), ("weight_kg", "kilograms"), ("bmi", "kg/m²"))}
     sex = meta.get("sex")
     return OwnBody(**numbers, sex=None if sex is None else str(sex))

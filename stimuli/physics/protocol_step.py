@@ -36,18 +36,26 @@ def reference_targets(protocol, sex: str, motion=None, where="NoCOM motion") -> 
     """(height_m, bmi) of the reference body of a sex, and a note when it is a guess.
 
     The body the NoCOM motion records (:func:`stimuli.physics.own_body.own_body`, read as
-    ``physics retarget`` reads it: ``weight_kg`` before ``bmi``); a motion that records no height
-    or neither weight nor BMI gets the mean height and BMI of the protocol's test actors of that
-    sex, and the note says so.
+    ``physics retarget`` reads it: ``weight_kg`` before ``bmi``, checked against the same human
+    ranges); a motion that records no height or neither weight nor BMI gets the mean height and
+    BMI of the protocol's test actors of that sex, and the note says so. A recorded sex other than
+    ``sex`` is an error: the file is that sex's NoCOM motion.
     """
+    from stimuli.physics.inertia import check_weight
     from stimuli.physics.own_body import own_body
+    from stimuli.protocol import HEIGHT_RANGE_M
 
     if motion is not None:
         own = own_body(motion, where, hint=" (the height and weight or BMI of the body the motion was made on)")
-        if own.height_m is not None and own.weight_kg is not None:
-            return (own.height_m, own.weight_kg / own.height_m ** 2), ""
-        if own.height_m is not None and own.bmi is not None:
-            return (own.height_m, own.bmi), ""
+        if own.sex is not None and own.sex != sex:
+            raise StimuliError(f"{where}: metadata sex is {own.sex!r}, but this file is the NoCOM motion of sex {sex}")
+        if own.height_m is not None and not HEIGHT_RANGE_M[0] <= own.height_m <= HEIGHT_RANGE_M[1]:
+            raise StimuliError(f"{where}: metadata height_m is {own.height_m:g}; expected metres, "
+                               f"{HEIGHT_RANGE_M[0]:g}–{HEIGHT_RANGE_M[1]:g} (not centimetres)")
+        weight = own.weight_at(own.height_m) if own.height_m is not None else None
+        if weight is not None:
+            check_weight(weight[0], own.height_m, where=f"{where}: metadata {weight[1]}")
+            return (own.height_m, own.weight_kg / own.height_m ** 2 if weight[1] == "weight_kg" else own.bmi), ""
     actors = [a for a in protocol.actors if a.sex == sex and not a.practice_only]
     if not actors:
         raise StimuliError(f"protocol {protocol.name}: no test actors of sex {sex}")
@@ -146,28 +154,29 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     protocol = load_protocol(protocol_path)
     out = Path(out)
     check_protocol_inputs(protocol, out, motions_dir, workers)
-    (out / "nocom").mkdir(parents=True, exist_ok=True)
-    (out / "motions").mkdir(exist_ok=True)
-    (out / "reports").mkdir(exist_ok=True)
-    cache = cache_dir()
-    cache.mkdir(parents=True, exist_ok=True)
     gains_text = GAINS_FILE.read_text()
-    jobs, cached, notes = [], [], []
-    for gait in protocol.gaits:
+    nocom, notes = [], []
+    for gait in protocol.gaits:   # every NoCOM motion and its reference body read and checked before any output
         for sex in sorted({a.sex for a in protocol.actors}):
             motion = nocom_motion(protocol, sex, gait, Path(motions_dir) if motions_dir else None)
-            nocom_path = motion.save(out / "nocom" / f"{sex}_{gait}.npz")
-            source = Path(motions_dir) / f"{sex}_{gait}.npz" if motions_dir else nocom_path
+            source = Path(motions_dir) / f"{sex}_{gait}.npz" if motions_dir else out / "nocom" / f"{sex}_{gait}.npz"
             reference, note = reference_targets(protocol, sex, motion, source)
-            if note:
-                notes.append(note)
-            for actor in (a for a in protocol.actors if a.sex == sex):
-                spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
-                        "weight_kg": actor.weight_kg, "gait": gait, "reference": list(reference)}
-                key = _key(nocom_path, spec, gains_text)
-                job = dict(spec, motion=str(nocom_path), out_motion=str(cache / f"{key}.npz"),
-                           out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}")
-                (cached if Path(job["out_report"]).is_file() else jobs).append(job)
+            notes += [note] if note else []
+            nocom.append((gait, sex, motion, reference))
+    for folder in ("nocom", "motions", "reports"):
+        (out / folder).mkdir(parents=True, exist_ok=True)
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    jobs, cached = [], []
+    for gait, sex, motion, reference in nocom:
+        nocom_path = motion.save(out / "nocom" / f"{sex}_{gait}.npz")
+        for actor in (a for a in protocol.actors if a.sex == sex):
+            spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
+                    "weight_kg": actor.weight_kg, "gait": gait, "reference": list(reference)}
+            key = _key(nocom_path, spec, gains_text)
+            job = dict(spec, motion=str(nocom_path), out_motion=str(cache / f"{key}.npz"),
+                       out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}")
+            (cached if Path(job["out_report"]).is_file() else jobs).append(job)
     progress(f"physics: {len(jobs)} COM motion(s) to simulate, {len(cached)} cached")
     if jobs:
         workers = max(1, min(workers, len(jobs), os.cpu_count() or 1))
