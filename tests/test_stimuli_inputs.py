@@ -285,7 +285,10 @@ def _protocol_variant(tmp_path: Path, source: Path, old: str, new: str) -> Path:
     (VALIDATION, "motion: lean_walk", 'motion: "bvh:nothere.bvh"', "nothere.bvh not found"),
     (EXP1, 'background: "#ffffff"', 'background: "notacolour"', "clip.background (line"),
     # the renderer draws SPEC's 15 markers; 12 used to pass validation and be ignored
-    (POINTLIGHT, "point_light_markers: 15", "point_light_markers: 12", "display.point_light_markers (line 44)"),
+    (POINTLIGHT, "point_light_markers: 15", "point_light_markers: 12", "point_light_markers must be 15"),
+    (POINTLIGHT, "point_light_markers: 15", "point_light_markers: 15.0", "display.point_light_markers (line 44)"),
+    (EXP1, "layout: treadmill", "layout: treadmill\n  point_light_markers: 15",
+     "point_light_markers is only used with layout point_light, not treadmill"),
 ])
 def test_validate_catches_protocol_mistakes(work, run_cli, source, old, new, message):
     path = _protocol_variant(work, source, old, new).relative_to(work)
@@ -327,12 +330,14 @@ def test_bundled_protocols_still_validate(run_cli):
     (["motion", "modify", "{walk}", "--height", "1.8", "--body-fat", "90", "--out", "m.npz"], "--body-fat: 90 is outside"),
     (["motion", "retarget", "{walk}", "--body", "sex=M,height=1.8,bmi=25,bmi=30", "--out", "r.npz"], "bmi is given twice"),
     (["motion", "retarget", "{walk}", "--body", "sex=M;height=1.8;bmi=25", "--out", "r.npz"], "comma-separated key=value"),
+    (["motion", "retarget", "{walk}", "--body", "sex=M,height=1_8,bmi=25", "--out", "r.npz"], "height must be a number, got '1_8'"),
     (["motion", "strip", "--protocol", VALIDATION, "--out", "s"], "declares no gaits"),
     (["motion", "strip", "{walk}", "--protocol", EXP1, "--out", "s"], "not both"),
     (["motion", "strip", "{walk}", "--frames", "0", "--out", "s.png"], "--frames: expected a whole number >= 1"),
     (["motion", "strip", "{walk}", "--frames", "-3", "--out", "s.png"], "--frames"),
     (["motion", "strip", "{walk}", "--out", "s.csv"], "a strip is an image"),
     (["motion", "metrics", "{walk}", "--body", BODY], "retarget it first"),
+    (["motion", "markers", "{walk}", "--out", "m.txt"], "the markers are written as a .csv file"),
 ])
 def test_motion_options(work, run_cli, walk, args, message):
     from stimuli.cli import main
@@ -344,6 +349,19 @@ def test_motion_options(work, run_cli, walk, args, message):
     before = _tree(work)
     assert message in _fails(run_cli, *[subs.get(str(a), a) for a in args])
     assert _tree(work) == before
+
+
+def test_metrics_and_markers_refuse_a_body_the_motion_is_not_on(work, run_cli, walk):
+    """Every Anny rig has the same joint names: a motion on a man of 1.80 m measured on a woman of 1.50 m
+    used to pass (Float 18 cm instead of 0.3)."""
+    from stimuli.cli import main
+
+    assert main(["motion", "retarget", str(walk), "--body", BODY, "--out", str(work / "r.npz")]) == 0
+    for command in (["metrics", "--json", "q.json"], ["markers", "--out", "m.csv"]):
+        err = _fails(run_cli, "motion", command[0], work / "r.npz", "--body", "sex=F,height=1.50,bmi=40", *command[1:])
+        assert "must be on its rig (it is on body M_h180_b25.0)" in " ".join(err.split()), err
+    assert run_cli("motion", "markers", work / "r.npz", "--body", BODY, "--out", work / "new" / "m.csv")[0] == 0
+    assert (work / "new" / "m.csv").read_text().startswith("frame,time_s,marker,x,y,z")   # folder made, no traceback
 
 
 def test_metrics_json_writes_null_for_nan(work, run_cli, walk, monkeypatch):

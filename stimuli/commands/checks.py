@@ -72,6 +72,8 @@ def parse_body(spec: str, option: str = "--body") -> dict:
                 raise StimuliError(f"{option}: sex must be F or M, got {v!r}")
             continue
         try:
+            if "_" in v:   # float() reads "1_8" as 18
+                raise ValueError(v)
             out[key] = float(v)
         except ValueError:
             raise StimuliError(f"{option}: {k} must be a number, got {v!r}") from None

@@ -110,12 +110,25 @@ def _fit(spec: str):
     return fit_body(b["sex"], b["height_m"], b["bmi"])
 
 
+# Bone offsets of a motion on a body's rig equal the rig's exactly; a body of 0.01 m or 0.3 BMI
+# difference is 0.7–3.5 mm off.
+OFFSET_TOLERANCE_M = 1e-4
+
+
 def _on_body(motion, args: argparse.Namespace):
     """The body of ``--body``, whose rig ``motion`` must be on (metrics and markers use its mesh)."""
+    import numpy as np
+
     body = _fit(args.body)
-    if list(motion.joint_names) != list(body.rig.names):
-        raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its "
-                           f"rig; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
+    # Every Anny rig has the same joint names; the bone offsets tell one body from another (a motion
+    # retargeted onto a man of 1.80 m measured on a woman of 1.50 m read Float 18 cm instead of 0.3).
+    same_rig = (list(motion.joint_names) == list(body.rig.names)
+                and np.abs(np.asarray(motion.offsets)[1:] - np.asarray(body.rig.offsets)[1:]).max() < OFFSET_TOLERANCE_M)
+    if not same_rig:
+        made_for = motion.metadata.get("body_id")
+        raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its rig"
+                           + (f" (it is on body {made_for})" if made_for else "")
+                           + f"; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
                            "--out R.npz")
     return body
 
@@ -330,6 +343,8 @@ def run_markers(args: argparse.Namespace) -> int:
     from stimuli.motion.markers import write_markers_csv
 
     check_output_file(args.out)
+    if args.out.suffix.lower() != ".csv":
+        raise StimuliError(f"--out {args.out}: the markers are written as a .csv file")
     m = _load(args.motion)
     body = _on_body(m, args) if args.body else None
     if body is None and m.metadata.get("naming") == "anny":

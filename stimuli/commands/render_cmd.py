@@ -33,7 +33,7 @@ def register(subparsers) -> None:
 
     p = subparsers.add_parser("preview", help="render one clip from a motion file and a body spec",
                               description="Render one clip: a motion (.npz on the Anny rig) or a generated gait "
-                                          "on a body given as sex,height,bmi.")
+                                          "on a body given as --body sex=M,height=1.80,bmi=25.")
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--motion", type=Path, help="motion .npz (DESIGN.md contract) on the Anny rig")
     source.add_argument("--gait", choices=["walk", "jog"], help="generate this gait for the body")

@@ -107,10 +107,12 @@ def write_markers_csv(motion, path, body=None):
     """Markers as a long CSV: frame, time_s, marker, x, y, z."""
     import pandas as pd
 
+    from stimuli.fileio import atomic_write_text
+
     tr = marker_trajectories(motion, body)
     t, m = np.meshgrid(np.arange(motion.n_frames), np.arange(len(MARKERS)), indexing="ij")
     df = pd.DataFrame({"frame": t.ravel(), "time_s": (t.ravel() / motion.fps).round(6),
                        "marker": np.array(MARKERS)[m.ravel()], "x": tr[..., 0].ravel().round(6),
                        "y": tr[..., 1].ravel().round(6), "z": tr[..., 2].ravel().round(6)})
-    df.to_csv(path, index=False)
+    atomic_write_text(path, df.to_csv(index=False))   # creates the folder; never a half-written file
     return path
