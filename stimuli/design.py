@@ -292,9 +292,23 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     trials.sort(key=lambda t: (t.participant, t.trial))
     block_orders = dict(sorted(block_orders.items()))
     order_labels = [[block_label(blocks[i]) for i in order] for order in orders or []]
-    notes = order_balance_notes(group_cells, group_of, block_orders, order_labels) + practice_notes(protocol)
+    notes = (order_balance_notes(group_cells, group_of, block_orders, order_labels) + practice_notes(protocol)
+             + back_to_back_notes(trials))
     return Design(protocol, n, seed, tests + practices + familiar, trials,
                   [block_label(b) for b in blocks], block_orders, notes)
+
+
+def back_to_back_notes(trials: list[Trial]) -> list[str]:
+    """A note when some participant sees one test clip twice in a row (a block that holds a single test clip
+    per participant, shown ``repetitions`` times: no order can keep its copies apart)."""
+    pairs = [(a, b) for a, b in zip(trials, trials[1:]) if a.participant == b.participant and a.kind == b.kind == "test"
+             and a.block == b.block and a.stimulus_id == b.stimulus_id]
+    if not pairs:
+        return []
+    first = pairs[0][1]
+    return [f"repetitions: {len({a.participant for a, _ in pairs})} participant(s) see the same test clip twice in a "
+            f"row ({len(pairs)} time(s); e.g. participant {first.participant}, {first.stimulus_id}, trial "
+            f"{first.trial}): their block holds a single test clip, so its repetitions cannot be kept apart"]
 
 
 def order_balance_notes(group_cells: list[dict], group_of: list[int], block_orders: dict[int, list[str]],

@@ -233,7 +233,18 @@ class Display(Strict):
     labels: list[str] | None = None
     body: str | None = Field(default=None, description="actor id whose body is shown when no factor maps to body")
     # The renderer draws the 15 markers of SPEC §1.3 (the thesis's set); other counts were accepted and ignored.
-    point_light_markers: Literal[15] | None = Field(default=None, description="15: the only marker set drawn")
+    point_light_markers: int | None = Field(default=None, strict=True, description="15: the only marker set drawn")
+
+    @model_validator(mode="after")
+    def _markers_are_the_drawn_set(self):
+        if self.point_light_markers is None:
+            return self
+        if self.point_light_markers != 15:
+            raise ValueError(f"point_light_markers must be 15 (SPEC §1.3's marker set, the one the renderer draws), "
+                             f"got {self.point_light_markers}")
+        if self.layout != "point_light":
+            raise ValueError(f"point_light_markers is only used with layout point_light, not {self.layout}")
+        return self
 
 
 class Alternatives(Strict):

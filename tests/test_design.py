@@ -208,3 +208,15 @@ def test_practice_levels_with_per_block_0_make_no_stimuli_and_say_so(tmp_path, r
     assert "note: practice.levels (BODY: P1, P2; MOTION: P1, P2) unused: practice.per_block is 0" in stdout
     code, stdout, _ = run_cli("validate", path)
     assert code == 0 and "0 practice" in stdout and "practice.levels (BODY: P1, P2; MOTION: P1, P2) unused" in stdout
+
+
+def test_a_block_of_one_clip_shown_twice_gets_a_note(protocol_path, tmp_path):
+    """thesis_validation with repetitions: 2 shows each participant's single clip back to back; the design
+    used to do so without a word."""
+    text = open(protocol_path("thesis_validation")).read().replace("repetitions: 1", "repetitions: 2")
+    assert "repetitions: 2" in text
+    (tmp_path / "p.yaml").write_text(text)
+    notes = build_design(load_protocol(tmp_path / "p.yaml"), seed=1).notes
+    assert any("see the same test clip twice in a row" in n for n in notes), notes
+    assert not [n for n in build_design(load_protocol(protocol_path("exp1_shape_motion")), seed=1).notes
+                if "twice in a row" in n]
