@@ -108,7 +108,9 @@ def qualtrics_text(sim: pd.DataFrame, design: DesignInfo, values: str = "text", 
     blocks = list(dict.fromkeys(sim.sort_values(["block"])["block_label"]))
     block_name = {b: "Block_" + "".join(c if c.isalnum() else "_" for c in b) for b in blocks}
     embedded = ["participant", "shapemotion_protocol", *design.between]
-    do_cols = [f"{block_name[b]}_DO" for b in blocks] + ["FL_5_DO"]
+    # Qualtrics writes a block's display order only when it randomises its questions (blocks.trials: random)
+    fixed = (design.protocol.get("blocks") or {}).get("trials") == "fixed"
+    do_cols = ([] if fixed else [f"{block_name[b]}_DO" for b in blocks]) + ["FL_5_DO"]
     question = str(design.protocol.get("response", {}).get("question", "Your answer"))
     rng = np.random.default_rng(seed)
     body = []
@@ -121,7 +123,7 @@ def qualtrics_text(sim: pd.DataFrame, design: DesignInfo, values: str = "text", 
         duration = int(rows["rt"].sum() + 60 * len(blocks))
         meta = _meta_values(start, duration, rng, values)
         by_block = rows.sort_values("trial").groupby("block_label", sort=False)["tag"].apply("|".join)
-        shown = [by_block.get(b, "") for b in blocks]
+        shown = [] if fixed else [by_block.get(b, "") for b in blocks]
         flow = "|".join(block_name[b] for b in rows.sort_values("trial")["block_label"].drop_duplicates())
         group = [str(rows.iloc[0][b]) for b in design.between]
         protocol = str(design.protocol.get("name", ""))

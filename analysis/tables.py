@@ -188,7 +188,7 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
             "eps": format_eps(eps, within_df(table, row["factors"])) if correction != "none" else "",
             "posthoc": posthoc_text(table.posthoc.get(name), not math.isnan(float(row["F"]))),
             "numbers": [None if math.isnan(float(row[c])) else float(row[c]) for c in EFFECT_COLUMNS],
-            "p_reported": p,
+            "p_reported": None if math.isnan(p) else p,   # blank in CSV, as the other undefined numbers
             "significant": p < a,
         })
     sec_list = [{"order": o, "title": _order_title(o), "rows": sections[o]} for o in sorted(sections)]

@@ -199,3 +199,14 @@ def test_report_notes_cells_with_a_missing_repetition(tmp_path):
     first = short["examples"][0]
     assert "2 of" in html and "participant × cell values rest on fewer answers than the design plans" in html
     assert f"participant {first['participant']}, {first['cell']} (1 of 2)" in html
+
+
+def test_csv_writes_an_undefined_reported_p_blank_not_nan():
+    """The CSV's p_reported of an untestable effect read the literal 'nan' while its other undefined cells were empty."""
+    import csv
+    import io
+
+    text = render(table_c(), "csv", all_rows=True)
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert rows and all(r["p_reported"] != "nan" for r in rows)
+    assert any(r["p_reported"] == "" for r in rows)

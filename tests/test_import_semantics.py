@@ -262,6 +262,21 @@ def test_unfinished_run_then_complete_run_imports_the_complete_one(exp2, tmp_pat
     assert "session 1 of 2" in unfinished and "list 2" in unfinished
 
 
+def test_a_blank_session_cell_stays_in_its_run(exp2, tmp_path):
+    """Two sessions named by a session column; two answer rows of the first leave the cell blank. They used to
+    form a run of their own without a closing row, and the participant's complete first run was lost."""
+    design, sim_a, sim_b = exp2
+    a, b = _jspsych_frame(design, sim_a), _jspsych_frame(design, sim_b)
+    first, second = _person(a, "1").assign(session="s1"), _person(b, "1").assign(session="s2")
+    answers = first.index[first["stimulus_id"] != ""]
+    first.loc[answers[3:5], "session"] = ""
+    pd.concat([first, second]).to_csv(tmp_path / "r.csv", index=False)
+    result = import_responses(tmp_path / "r.csv", design)
+    assert result.reconciles
+    assert _answers_of(result, "1") == _session_answers(first)
+    assert "unfinished" not in _reasons(result, "1")
+
+
 def test_two_runs_on_different_lists_shuffled_are_told_apart_by_list(exp2, tmp_path):
     design, sim_a, _ = exp2
     a = _jspsych_frame(design, sim_a)

@@ -88,22 +88,11 @@ def find_sessions(rows: list[dict], pids: list[str], wellformed: list[bool], raw
     counter = "trial_index" if jspsych else "trial"
     clock = "time_elapsed" if jspsych else None
     has_end = "end" in raw.columns
-    # a row without a session value belongs to its participant's only session value, if there is one
-    values: dict[tuple[str, str], set[str]] = {}
-    for i, record in enumerate(rows):
-        for c in id_cols:
-            if wellformed[i] and cell_text(record.get(c)):
-                values.setdefault((pids[i], c), set()).add(cell_text(record.get(c)))
-
-    def value(i: int, column: str) -> str:
-        own = cell_text(rows[i].get(column))
-        known = values.get((pids[i], column), set())
-        return own or (next(iter(known)) if len(known) == 1 else "")
-
+    filled = {c: _filled(rows, pids, wellformed, c) for c in id_cols}
     parts: dict[tuple, list[int]] = {}
     for i in range(len(rows)):
         if wellformed[i]:
-            parts.setdefault((pids[i], *(value(i, c) for c in id_cols)), []).append(i)
+            parts.setdefault((pids[i], *(filled[c][i] for c in id_cols)), []).append(i)
     sessions = []
     for key, indices in parts.items():
         label = ", ".join(f"{c} {v!r}" if c != "list" else f"list {v}" for c, v in zip(id_cols, key[1:]) if v)
@@ -112,6 +101,28 @@ def find_sessions(rows: list[dict], pids: list[str], wellformed: list[bool], raw
                                     finished=not has_end or any(cell_text(rows[i].get("end")).lower() in ("1", "true")
                                                                 for i in run)))
     return sessions
+
+
+def _filled(rows: list[dict], pids: list[str], wellformed: list[bool], column: str) -> dict[int, str]:
+    """Row index → the session value of ``column``; a blank cell takes the value of its participant's row
+    before it (at the start of the participant's rows: the first value after it). A blank cell inside a
+    run used to make a run of its own, with no closing row, and the whole run was then lost as unfinished."""
+    out: dict[int, str] = {}
+    last: dict[str, str] = {}
+    waiting: dict[str, list[int]] = {}
+    for i, record in enumerate(rows):
+        if not wellformed[i]:
+            continue
+        value, pid = cell_text(record.get(column)), pids[i]
+        if value:
+            last[pid] = value
+            out.update({j: value for j in waiting.pop(pid, [])})
+        elif pid in last:
+            value = last[pid]
+        else:
+            waiting.setdefault(pid, []).append(i)
+        out[i] = value
+    return out
 
 
 def _split_runs(rows: list[dict], indices: list[int], counter: str, clock: str | None,
