@@ -201,19 +201,28 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
 
 
 def planned_answers(design: DesignInfo, keys: list[str]) -> pd.DataFrame | None:
-    """Answers the design plans per participant × cell: test conditions of the cell × repetitions.
+    """Answers the design plans per participant × cell: the test clips a participant sees in the cell ×
+    repetitions — every arrangement of a condition, or one when arrangements are counterbalanced between
+    participants (conditions.csv lists each arrangement as a stimulus of its own).
 
     ``keys`` are the cell's factors (between and within); conditions.csv is grouped by those of them it
     has (a between factor it lacks does not change which stimuli a participant sees). Column ``planned``;
     None when conditions.csv names none of the factors but some are asked for.
     """
     tests = design.test_conditions
+    one_arrangement = ((design.protocol.get("alternatives") or {}).get("counterbalance") == "between"
+                       and "condition_id" in tests.columns)
     present = [k for k in keys if k in tests.columns]
     if keys and not present:
         return None
+
+    def seen(rows: pd.DataFrame) -> int:
+        return rows["condition_id"].nunique() if one_arrangement else len(rows)
+
     if not present:
-        return pd.DataFrame({"planned": [len(tests) * design.repetitions]})
-    frame = tests.astype({k: str for k in present}).groupby(present, observed=True).size()
+        return pd.DataFrame({"planned": [seen(tests) * design.repetitions]})
+    groups = tests.astype({k: str for k in present}).groupby(present, observed=True)
+    frame = groups["condition_id"].nunique() if one_arrangement else groups.size()
     return (frame * design.repetitions).rename("planned").reset_index()
 
 

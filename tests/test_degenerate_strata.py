@@ -27,6 +27,7 @@ from analysis.tables import render
 
 FIXTURES = Path(__file__).parent / "fixtures" / "anova"
 DATA = Path(__file__).parent / "data" / "responses"
+ROOT = Path(__file__).resolve().parents[1]
 SPHERICITY = ["eps_gg", "eps_hf", "p_gg", "p_hf", "mauchly_w", "mauchly_p"]
 NO_ERROR = ["W", "W:G", "W:V", "W:V:G"]   # Error(W) and Error(W:V) are 0 up to rounding
 
@@ -210,3 +211,24 @@ def test_csv_writes_an_undefined_reported_p_blank_not_nan():
     rows = list(csv.DictReader(io.StringIO(text)))
     assert rows and all(r["p_reported"] != "nan" for r in rows)
     assert any(r["p_reported"] == "" for r in rows)
+
+
+def test_complete_data_of_a_between_counterbalanced_design_are_not_short(tmp_path):
+    """With arrangements counterbalanced between participants, each sees one arrangement per condition;
+    the planned count took every arrangement and flagged all 128 values of complete Exp-2 data as short."""
+    from analysis.io_design import load_design
+    from analysis.io_writers import export_text
+    from analysis.model_spec import load_model
+    from analysis.report import analyze
+    from analysis.simulate import simulate_responses
+    from stimuli.cli import main
+
+    text = (ROOT / "protocols" / "exp2_com_vs_average.yaml").read_text()
+    assert "counterbalance: within" in text
+    (tmp_path / "p.yaml").write_text(text.replace("counterbalance: within", "counterbalance: between"))
+    assert main(["design", str(tmp_path / "p.yaml"), "--participants", "8", "--out", str(tmp_path / "d")]) == 0
+    design = load_design(tmp_path / "d")
+    sim = simulate_responses(design, load_model(None, design), 8, seed=2)
+    (tmp_path / "r.csv").write_text(export_text(sim, design, "long"), encoding="utf-8")
+    summary = analyze(tmp_path / "d", tmp_path / "r.csv", tmp_path / "report", models=False)
+    assert "cells_with_fewer_answers" not in summary["sections"][0]["results"]

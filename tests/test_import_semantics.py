@@ -338,6 +338,21 @@ def test_long_file_numbering_trials_per_block_is_one_run(tiny_pl, tmp_path):
     assert result.reconciles and result.n_excluded_rows == 0 and len(result.data) == len(sim)
 
 
+def test_long_file_numbering_trials_per_block_with_a_participant_twice(exp2, tmp_path):
+    """Per-block trial numbers and a second run of participant 1: every block used to count as a run, so
+    block 1 was kept and the participant lost to missing cells; the first run is now kept whole."""
+    design, sim_a, sim_b = exp2
+    a = pd.read_csv(io.StringIO(export_text(sim_a, design, "long")), dtype=str, keep_default_na=False)
+    b = pd.read_csv(io.StringIO(export_text(sim_b, design, "long")), dtype=str, keep_default_na=False)
+    frame = pd.concat([a, b[b["participant"] == "1"]], ignore_index=True)
+    frame["trial"] = frame.groupby(["participant", "block", frame.index >= len(a)]).cumcount() + 1
+    frame.to_csv(tmp_path / "r.csv", index=False)
+    result = import_responses(tmp_path / "r.csv", design)
+    assert result.reconciles
+    assert _reasons(result, "1") == {"duplicate participant id": int((b["participant"] == "1").sum())}
+    assert len(result.data[result.data["participant"] == "1"]) == int((a["participant"] == "1").sum())
+
+
 # -- F3: a model the data do not allow -------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")

@@ -148,24 +148,34 @@ def _split_runs(rows: list[dict], indices: list[int], counter: str, clock: str |
         segments[-1].append(i)
         last_count = value if value is not None else last_count
         last_clock = now if now is not None else last_clock
-    if not jspsych and not _answers_overlap(rows, segments):
-        return [(indices, "")]   # the long file numbers its trials per block, say: one run
+    if not jspsych:   # a long file may number its trials per block: a restart alone is no new run
+        segments = _join_blocks(rows, segments)
+        repeats = max(Counter(_answer_key(rows[i]) for i in indices if _answer_key(rows[i])[0]).values(), default=1)
+        if len(segments) == 1:
+            return [(indices, "")]
     if len(segments) == repeats:
         return [(segment, "") for segment in segments]
-    value = min(v for v, n in counts.items() if n == repeats)
-    return [(indices, f"{counter} {value:g} appears {repeats} times, in {len(segments)} stretches of rows "
-                      f"that do not each count up from the start (rows of {repeats} runs interleaved, e.g. sorted "
-                      f"or shuffled)")]
+    value = min(v for v, n in counts.items() if n == max(counts.values()))
+    return [(indices, f"{counter} {value:g} appears {max(counts.values())} times, in {len(segments)} stretches of "
+                      f"rows that do not each count up from the start (rows of several runs interleaved, e.g. "
+                      f"sorted or shuffled)")]
 
 
-def _answers_overlap(rows: list[dict], segments: list[list[int]]) -> bool:
-    """Whether two stretches of a long file answer the same stimulus (and repetition): a second run, not the
-    file's own trial numbering restarting per block."""
+def _answer_key(row: dict) -> tuple[str, str]:
+    return cell_text(row.get("stimulus_id")), cell_text(row.get("repetition"))
+
+
+def _join_blocks(rows: list[dict], segments: list[list[int]]) -> list[list[int]]:
+    """Consecutive stretches of a long file joined into runs until one answers a stimulus (and repetition)
+    the run already answered: per-block trial numbers restart without a new run; a repeated answer is one."""
+    runs: list[list[int]] = []
     seen: set = set()
     for segment in segments:
-        here = {(cell_text(rows[i].get("stimulus_id")), cell_text(rows[i].get("repetition"))) for i in segment
-                if cell_text(rows[i].get("stimulus_id"))}
-        if seen & here:
-            return True
-        seen |= here
-    return False
+        here = {_answer_key(rows[i]) for i in segment if _answer_key(rows[i])[0]}
+        if runs and not seen & here:
+            runs[-1] += segment
+            seen |= here
+        else:
+            runs.append(list(segment))
+            seen = here
+    return runs
