@@ -89,3 +89,21 @@ def test_markers_cli_note_for_an_anny_rig_without_its_body(body, walk, tmp_path,
     code, _, err = run_cli("motion", "markers", tmp_path / "r.npz", "--out", tmp_path / "mk.csv")
     assert code == 0 and "give that body as --body" in err
 
+
+
+def test_a_motion_on_another_bodys_rig_is_not_on_this_one(body, walk):
+    """Every Anny rig has the same joint names: the markers of a man's motion were computed on a woman's body
+    and a clip played it on her mesh unretargeted; the bones tell the rigs apart."""
+    from stimuli.bodies import fit_body
+    from stimuli.errors import StimuliError
+    from stimuli.motion.markers import marker_trajectories
+    from stimuli.motion.retarget import is_on_rig, retarget
+    from stimuli.render.sources import on_rig
+
+    other = fit_body("F", 1.5, 40.0)
+    mine = retarget(walk, body).slice(0, 3)
+    assert is_on_rig(mine, body) and not is_on_rig(mine, other)
+    with pytest.raises(StimuliError, match="not on the body's rig"):
+        marker_trajectories(mine, other)
+    shown = on_rig(mine, other)
+    assert is_on_rig(shown, other) and on_rig(mine, body) is mine

@@ -110,21 +110,12 @@ def _fit(spec: str):
     return fit_body(b["sex"], b["height_m"], b["bmi"])
 
 
-# Bone offsets of a motion on a body's rig equal the rig's exactly; a body of 0.01 m or 0.3 BMI
-# difference is 0.7–3.5 mm off.
-OFFSET_TOLERANCE_M = 1e-4
-
-
 def _on_body(motion, args: argparse.Namespace):
     """The body of ``--body``, whose rig ``motion`` must be on (metrics and markers use its mesh)."""
-    import numpy as np
+    from stimuli.motion.retarget import is_on_rig
 
     body = _fit(args.body)
-    # Every Anny rig has the same joint names; the bone offsets tell one body from another (a motion
-    # retargeted onto a man of 1.80 m measured on a woman of 1.50 m read Float 18 cm instead of 0.3).
-    same_rig = (list(motion.joint_names) == list(body.rig.names)
-                and np.abs(np.asarray(motion.offsets)[1:] - np.asarray(body.rig.offsets)[1:]).max() < OFFSET_TOLERANCE_M)
-    if not same_rig:
+    if not is_on_rig(motion, body):   # a motion of a 1.80 m man measured on a 1.50 m woman read Float 18 cm
         made_for = motion.metadata.get("body_id")
         raise StimuliError(f"{args.motion}: --body measures on the body's mesh, so the motion must be on its rig"
                            + (f" (it is on body {made_for})" if made_for else "")

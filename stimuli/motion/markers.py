@@ -98,7 +98,9 @@ def marker_trajectories(motion, body=None) -> np.ndarray:
     motion must be on that body's rig and the markers are the dots its clips draw."""
     if body is None:
         return skeleton_markers(motion)
-    if list(motion.joint_names) != list(body.rig.names):
+    from stimuli.motion.retarget import is_on_rig
+
+    if not is_on_rig(motion, body):
         raise StimuliError("markers: the motion is not on the body's rig; retarget it onto the body first")
     return body_markers(body, motion.rotations, motion.root_translation)
 

@@ -21,6 +21,7 @@ from scipy.ndimage import binary_closing
 
 from stimuli.motion import quat
 from stimuli.motion.motion import Motion
+from stimuli.motion.retarget import is_on_rig
 from stimuli.motion.skeleton import role_indices
 
 
@@ -54,7 +55,7 @@ def to_motion(motion: Motion, body, sim, ref, ragdoll) -> Motion:
     rotations = global_pose(motion, sim, ref)
     t = np.arange(sim.xquat.shape[0]) / sim.fps
     pelvis = sim.body_names.index("pelvis")
-    on_body_rig = list(motion.joint_names) == list(body.rig.names)
+    on_body_rig = is_on_rig(motion, body)
     if on_body_rig:
         offsets = body.rig.offsets.copy()
         root = sim.xpos[:, pelvis].copy()

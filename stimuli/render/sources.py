@@ -154,10 +154,12 @@ def _generated(actor_json: str, gait: str, cadence: float, speed: float, seed: i
 
 
 def on_rig(motion, body):
-    """``motion`` on ``body``'s own Anny rig (unchanged when it is on that rig already)."""
-    if list(motion.joint_names) == list(body.rig.names):
+    """``motion`` on ``body``'s own Anny rig (unchanged when it is on that rig already; a motion on
+    another body's rig, with the same joint names, is retargeted too)."""
+    from stimuli.motion.retarget import is_on_rig, retarget
+
+    if is_on_rig(motion, body):
         return motion
-    from stimuli.motion.retarget import retarget
 
     return retarget(motion, body)
 
