@@ -551,7 +551,7 @@ def test_protocol_step_checks_every_reference_body_before_writing(protocol_path,
     (it failed inside the workers naming no file, and left nocom/ motions/ reports/ behind)."""
     from stimuli.physics.protocol_step import run_protocol
 
-    for name, meta, message in [("cm", {"height_m": 162.0, "bmi": 24.0, "sex": "F"}, "metadata height_m is 162"),
+    for name, meta, message in [("cm", {"height_m": 162.0, "bmi": 24.0, "sex": "F"}, "metadata height_m: 162 is outside the human range"),
                                 ("sex", {"height_m": 1.62, "bmi": 24.0, "sex": "M"},
                                  "metadata sex is 'M', but this file is the NoCOM motion of sex F")]:
         folder = tmp_path / name

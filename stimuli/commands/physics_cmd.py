@@ -109,15 +109,14 @@ def run_retarget(args: argparse.Namespace) -> int:
     from stimuli.motion import Motion
     from stimuli.physics.controller import Gains, motion_gait
     from stimuli.physics.inertia import check_weight
+    from stimuli.physics.own_body import check_reference
     from stimuli.physics.retarget import RagdollFellError, retarget
-    from stimuli.protocol import HEIGHT_RANGE_M
 
     _check_retarget_options(args)
     check_weight(args.weight, args.height, where="--weight")
     motion = Motion.load(args.motion)
     ref_h, ref_w, h_from, w_from = _reference(args, motion)
-    in_range(h_from, ref_h, HEIGHT_RANGE_M, "m (the motion's own body, in metres)")
-    check_weight(ref_w, ref_h, where=w_from)
+    check_reference(ref_h, ref_w, h_from, w_from)
     for line in _motion_notes(args, motion):
         print(f"warning: {line}", file=sys.stderr)
     body = _body(args.sex, args.height, args.weight, args.allow_nearest, "--height/--weight")

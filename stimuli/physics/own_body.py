@@ -60,3 +60,16 @@ def _number(value, where, field: str, unit: str, hint: str) -> float | None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise StimuliError(f"{where}: metadata {field} is {value!r}; expected a number ({unit})" + hint)
     return float(value)
+
+
+def check_reference(height_m: float, weight_kg: float, height_from: str, weight_from: str) -> None:
+    """The reference body's height (metres, a human one) and weight (a physical one for the ragdoll);
+    errors name where each figure came from (an option, or ``file: metadata field``)."""
+    from stimuli.physics.inertia import check_weight
+    from stimuli.protocol import HEIGHT_RANGE_M
+
+    low, high = HEIGHT_RANGE_M
+    if not (math.isfinite(height_m) and low <= height_m <= high):
+        raise StimuliError(f"{height_from}: {height_m:g} is outside the human range {low:g}–{high:g} m "
+                           "(the motion's own body, in metres, not centimetres)")
+    check_weight(weight_kg, height_m, where=weight_from)

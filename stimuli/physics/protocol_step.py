@@ -41,20 +41,15 @@ def reference_targets(protocol, sex: str, motion=None, where="NoCOM motion") -> 
     BMI of the protocol's test actors of that sex, and the note says so. A recorded sex other than
     ``sex`` is an error: the file is that sex's NoCOM motion.
     """
-    from stimuli.physics.inertia import check_weight
-    from stimuli.physics.own_body import own_body
-    from stimuli.protocol import HEIGHT_RANGE_M
+    from stimuli.physics.own_body import check_reference, own_body
 
     if motion is not None:
         own = own_body(motion, where, hint=" (the height and weight or BMI of the body the motion was made on)")
         if own.sex is not None and own.sex != sex:
             raise StimuliError(f"{where}: metadata sex is {own.sex!r}, but this file is the NoCOM motion of sex {sex}")
-        if own.height_m is not None and not HEIGHT_RANGE_M[0] <= own.height_m <= HEIGHT_RANGE_M[1]:
-            raise StimuliError(f"{where}: metadata height_m is {own.height_m:g}; expected metres, "
-                               f"{HEIGHT_RANGE_M[0]:g}–{HEIGHT_RANGE_M[1]:g} (not centimetres)")
         weight = own.weight_at(own.height_m) if own.height_m is not None else None
         if weight is not None:
-            check_weight(weight[0], own.height_m, where=f"{where}: metadata {weight[1]}")
+            check_reference(own.height_m, weight[0], f"{where}: metadata height_m", f"{where}: metadata {weight[1]}")
             return (own.height_m, own.weight_kg / own.height_m ** 2 if weight[1] == "weight_kg" else own.bmi), ""
     actors = [a for a in protocol.actors if a.sex == sex and not a.practice_only]
     if not actors:
