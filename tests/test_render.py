@@ -219,3 +219,18 @@ def test_inputs_hash_follows_look_stimulus_and_motion_files(tmp_path, protocol_p
     assert base != inputs_hash(protocol, first, look, [motion], poses="procedural")
     motion.write_bytes(b"two")
     assert base != inputs_hash(protocol, first, look, [motion])
+
+
+def test_preview_library_checks_its_settings_before_fitting(tmp_path, monkeypatch):
+    """The checks moved with the CLI once; ``preview()`` called from Python wrote to any suffix and took
+    zero frames. They run before a body is fitted."""
+    from stimuli.errors import StimuliError
+    from stimuli.render import preview as module
+
+    monkeypatch.setattr("stimuli.bodies.fit_body", lambda *a, **k: pytest.fail("fitted before checking"))
+    for kwargs, message in [({"out": tmp_path / "c.avi"}, "expected a .mp4"),
+                            ({"out": tmp_path / "c.mp4", "fps": 0}, "--fps: expected a frame rate > 0"),
+                            ({"out": tmp_path / "c.mp4", "duration_s": 0.01, "fps": 5}, "gives no frame")]:
+        with pytest.raises(StimuliError, match=message):
+            module.preview(sex="M", height_m=1.8, bmi=25.0, **kwargs)
+    assert not list(tmp_path.iterdir())

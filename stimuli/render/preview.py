@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stimuli.errors import StimuliError
 from stimuli.render.clip import Figure, Look, render_frames
 from stimuli.render.sources import fit_loop, on_rig
 from stimuli.render.video import write_video
@@ -37,6 +38,7 @@ def preview(out, sex: str, height_m: float, bmi: float, layout: str = "treadmill
     """
     from stimuli.bodies import fit_body
 
+    check_preview(out, fps, duration_s, belt_speed)
     width, height = size
     look = Look(layout, width, height, int(fps), float(duration_s), *camera,
                 "#000000" if layout == "point_light" else "#ffffff")
@@ -46,6 +48,27 @@ def preview(out, sex: str, height_m: float, bmi: float, layout: str = "treadmill
     write_video(render_frames(look, [Figure(body, rot, root, speed)]), out, look.fps, width, height, look.n_frames,
                 poster=out.with_suffix(".png"))
     return out
+
+
+def check_preview(out, fps: float, duration_s: float, belt_speed: float | None) -> None:
+    """Every setting of :func:`preview` in range and the output writable, before a body is fitted or a
+    frame drawn (errors name the ``render preview`` options)."""
+    import math
+
+    from stimuli.fileio import check_output_file
+
+    out = Path(out)
+    if out.suffix.lower() != ".mp4":
+        raise StimuliError(f"--out: expected a .mp4 file name, got {out}")
+    check_output_file(out)
+    check_output_file(out.with_suffix(".png"), "--out (its poster)")
+    for option, value, what in (("--duration", duration_s, "a duration > 0 seconds"), ("--fps", fps, "a frame rate > 0")):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise StimuliError(f"{option}: expected {what}, got {value}")
+    if belt_speed is not None and not (math.isfinite(belt_speed) and belt_speed >= 0):
+        raise StimuliError(f"--speed: expected a belt speed >= 0 m/s, got {belt_speed}")
+    if duration_s * fps < 1:
+        raise StimuliError(f"--duration {duration_s:g} s at --fps {fps} gives no frame")
 
 
 def _poses(body, look: Look, motion, gait, belt_speed):
