@@ -223,7 +223,9 @@ def _guarded(function, data: pd.DataFrame, design: DesignInfo, column: str) -> p
     from statsmodels.tools.sm_exceptions import PerfectSeparationError
     try:
         table = function(data, design)
-    except (ModelNotComputed, PerfectSeparationError, np.linalg.LinAlgError, ValueError) as exc:
+    # statsmodels reports data it cannot fit as ValueError ("endog values must be 0 and 1, and not all
+    # identical", "need covariance of parameters"); ModelNotComputed and LinAlgError are ValueErrors too
+    except (PerfectSeparationError, ValueError) as exc:
         reason = str(exc) if isinstance(exc, ModelNotComputed) else \
             f"statsmodels could not estimate it ({type(exc).__name__}: {exc})"
         return not_computed_row(MODEL_NAMES[function.__name__], reason + _separation_hint(data, design, column))

@@ -76,7 +76,7 @@ def effect_statistics(row, p: float, noise: float) -> dict[str, str]:
         return dict.fromkeys(("F", "p", "eta2", "nc", "power"), UNTESTABLE)
     shown = {"p": format_p(p), "power": format_num(row["power"])}
     if math.isinf(float(row["F"])):   # a ratio to rounding noise: F → ∞ and observed power → 1
-        return shown | {"F": "∞", "eta2": format_num(row["eta2_partial"]), "nc": "∞", "power": format_num(1.0)}
+        return shown | {"F": "∞", "eta2": format_num(row["eta2_partial"]), "nc": "∞"}
     if abs(row["ss"]) <= noise:
         return shown | dict.fromkeys(("F", "eta2", "nc"), format_num(0.0))
     return shown | {"F": format_num(row["F"]), "eta2": format_num(row["eta2_partial"]),

@@ -77,13 +77,11 @@ class TagIndex:
     def __init__(self, stimulus_ids, extra: dict[str, str] | None = None):
         self._exact: dict[str, set[str]] = {}   # tag as written (the id, its export form, a manifest tag) → ids
         self._loose: dict[str, set[str]] = {}   # case and punctuation ignored → ids
-        self._names: dict[str, set[str]] = {}   # id → the tags that name it (for messages)
         pairs = [(str(s), str(s)) for s in stimulus_ids] + [(str(t), str(s)) for t, s in (extra or {}).items()]
         for tag, sid in pairs:
             for form in {tag, _safe(tag)}:
                 self._exact.setdefault(form, set()).add(sid)
             self._loose.setdefault(_key(tag), set()).add(sid)
-            self._names.setdefault(sid, set()).add(tag)
 
     def _lookup(self, tag: str, exact: bool) -> str | None:
         index, key, how = ((self._exact, tag, "exactly") if exact else

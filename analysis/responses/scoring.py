@@ -71,9 +71,8 @@ def score_likert(value: str, labels: list[str], k: int | None = None) -> int:
 
 def screen_labels(position_labels: list[str], k: int) -> list[str]:
     """What the k screen positions are called: the design's position labels, else ``A``, ``B``, … (as the
-    survey exporters name them); for two clips ``left``/``right`` are accepted as well."""
-    labels = list(position_labels) if len(position_labels) == k else [chr(ord("A") + i) for i in range(k)]
-    return labels
+    survey exporters name them)."""
+    return list(position_labels) if len(position_labels) == k else [chr(ord("A") + i) for i in range(k)]
 
 
 def _label_positions(k: int, position_labels: list[str]) -> dict[str, set[int]]:
