@@ -184,8 +184,8 @@ def _check_strength_levels(factor: "Factor") -> None:
 
 
 class GaitSpec(Strict):
-    cadence_spm: float = Field(gt=CADENCE_RANGE_SPM[0], lt=CADENCE_RANGE_SPM[1], description="steps per minute")
-    speed_mps: float = Field(gt=SPEED_RANGE_MPS[0], lt=SPEED_RANGE_MPS[1], description="belt speed in m/s")
+    cadence_spm: float = Field(ge=CADENCE_RANGE_SPM[0], le=CADENCE_RANGE_SPM[1], description="steps per minute")
+    speed_mps: float = Field(ge=SPEED_RANGE_MPS[0], le=SPEED_RANGE_MPS[1], description="belt speed in m/s")
 
 
 class Camera(Strict):

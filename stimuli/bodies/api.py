@@ -138,7 +138,7 @@ def body_for_actor(actor, **kwargs) -> Body:
                     body_id=actor.id, **kwargs)
 
 
-def fit_protocol_bodies(protocol, allow_nearest: bool = False, progress: bool = True, include_practice: bool = True,
+def fit_protocol_bodies(protocol, allow_nearest: bool = False, progress: bool = False, include_practice: bool = True,
                         **kwargs) -> list[Body]:
     """Every actor's body, in protocol order (cached after the first fit; ``kwargs`` go to
     :func:`fit_body`, e.g. ``use_cache``). Unreachable targets are collected and reported together

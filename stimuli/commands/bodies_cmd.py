@@ -71,7 +71,7 @@ def _run_protocol(args) -> int:
     from stimuli.protocol import load_protocol
 
     protocol = load_protocol(args.protocol)
-    bodies = fit_protocol_bodies(protocol, allow_nearest=args.allow_nearest)
+    bodies = fit_protocol_bodies(protocol, allow_nearest=args.allow_nearest, progress=True)
     write_bodies(bodies, args.out, sheet=not args.no_sheet, title=f"{protocol.name}: bodies sorted by BMI")
     for b in bodies:
         a = b.anthropometry

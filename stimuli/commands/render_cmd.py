@@ -52,7 +52,7 @@ def register(subparsers) -> None:
 def run_render(args: argparse.Namespace) -> int:
     from stimuli.errors import StimuliError
     from stimuli.render.manifest import verify_manifest
-    from stimuli.render.pipeline import export_survey, render_protocol
+    from stimuli.render.pipeline import render_protocol, survey_for_render
 
     if args.verify:
         _check_manifest_present(args.out)
@@ -71,7 +71,7 @@ def run_render(args: argparse.Namespace) -> int:
                              source=args.poses, motions_dir=args.motions, warn=lambda line: print(f"warning: {line}"))
     print(report.summary())
     if not args.no_survey:
-        missing, exports = export_survey(report, args.video_base_url)
+        missing, exports = survey_for_render(report, args.video_base_url)
         if exports is None:
             print(f"survey: not exported, {len(missing)} stimuli have no clip yet (render them all first)")
         for r in exports or ():

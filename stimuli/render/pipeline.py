@@ -198,7 +198,7 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     return report
 
 
-def export_survey(report: RenderReport, video_base_url=None) -> tuple[list[str], list | None]:
+def survey_for_render(report: RenderReport, video_base_url=None) -> tuple[list[str], list | None]:
     """Make a render folder a complete survey source: the design files and every survey export.
 
     Only when every stimulus of the report's design has its clip (a ``limit``/``only`` render is
