@@ -66,5 +66,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()   # --help, and no stray arguments
     np.set_printoptions(precision=3)
     main()
