@@ -21,12 +21,13 @@ import functools
 from pathlib import Path
 
 from stimuli.errors import StimuliError
+from stimuli.protocol import SOURCE_MOTIONS, capture_file
 from stimuli.render.clip import Look
 from stimuli.render.sources import MissingSource, fit_loop, on_rig
 
 BASE_WALK = Path(__file__).resolve().parents[1] / "data" / "cmu_35_01_walk.bvh"
 BASE_CYCLES = 1  # the capture holds one whole cycle; one-cycle loops let fit_loop keep speed ratios
-MOTION_KINDS = ("lean_walk", "modifier", "generator", "bvh:<path>")
+MOTION_KINDS = (*SOURCE_MOTIONS, "bvh:<path>")
 
 
 _ON_BODY: dict = {}  # (body id, body targets, file) -> the walk on that body, per process
@@ -112,12 +113,6 @@ def source_motion(protocol, stimulus, level: str, body, look: Look):
         return _fitted(walk_on(body, captured_path(protocol, factor, level, spec)), look, 0.0)
     raise StimuliError(f"{protocol.name}: factors.{factor.name}.level_settings.{level}.motion = {spec!r}: "
                        f"expected one of {', '.join(MOTION_KINDS)}")
-
-
-def capture_file(protocol, spec: str) -> Path:
-    """The path a ``bvh:<path>`` setting names; a relative path starts from the protocol's folder."""
-    path = Path(spec[len("bvh:"):].strip()).expanduser()
-    return path if path.is_absolute() else protocol.folder / path
 
 
 def captured_path(protocol, factor, level: str, spec: str) -> Path:
