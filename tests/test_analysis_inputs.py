@@ -571,7 +571,8 @@ def test_anova_csv_is_read_once_with_practice_cells_as_written_and_missing_value
 
 
 @pytest.mark.parametrize("module", ["analysis.practice", "analysis.io_files", "analysis.io_design", "analysis.report",
-                                    "analysis.simulate", "analysis.power", "analysis.measures"])
+                                    "analysis.simulate", "analysis.power", "analysis.measures",
+                                    "analysis.responses.scoring", "analysis.models"])
 def test_docstring_examples_run(module):
     import doctest
     import importlib

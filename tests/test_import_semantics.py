@@ -353,6 +353,24 @@ def test_long_file_numbering_trials_per_block_with_a_participant_twice(exp2, tmp
     assert len(result.data[result.data["participant"] == "1"]) == int((a["participant"] == "1").sum())
 
 
+def test_a_likert_scale_labelled_0_to_4_reads_the_same_in_every_format(tmp_path):
+    """A Qualtrics choice-text export writes the scale's labels: with labels 0…4, "3" is the fourth point and
+    "0" the first. It was read as the rating 3, and "0" as outside the scale (every respondent excluded)."""
+    text = (ROOT / "protocols" / "exp1_shape_motion.yaml").read_text()
+    old = "labels: [Very Inconsistent, Inconsistent, Neutral, Consistent, Very Consistent]"
+    assert old in text
+    protocol = tmp_path / "p.yaml"
+    protocol.write_text(text.replace(old, 'labels: ["0", "1", "2", "3", "4"]'))
+    design = _make_design(tmp_path, protocol, 4)
+    sim = _simulated(design, participants=4, seed=3)
+    ratings = {}
+    for fmt in ("long", "qualtrics", "qualtrics-numeric", "jspsych"):
+        (tmp_path / f"{fmt}.csv").write_text(export_text(sim, design, fmt), encoding="utf-8")
+        data = import_responses(tmp_path / f"{fmt}.csv", design).data
+        ratings[fmt] = data.sort_values(["participant", "stimulus_id", "repetition"])["rating"].tolist()
+    assert len(ratings["long"]) == len(sim) and all(r == ratings["long"] for r in ratings.values())
+
+
 # -- F3: a model the data do not allow -------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from analysis.errors import AnalysisError
 from analysis.responses.answers import Answer, Exclusion, TagIndex
 from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_column
+from analysis.responses.scoring import CHOICE, LABEL
 
 TIMING = re.compile(r"_(First Click|Last Click|Page Submit|Click Count)$", re.IGNORECASE)
 RANK_POSITION = re.compile(r"^(?P<base>.+)_(?P<pos>\d+)$")
@@ -86,6 +87,7 @@ def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking:
     finished = _find(raw.columns, "Finished")
     status = _find(raw.columns, "Status")
     group_cols = {name: _find(raw.columns, name) for name in between}
+    reading = LABEL if _choice_text(raw, finished, status) else CHOICE
     seen: dict[str, int] = {}
     answers: list[Answer] = []
     for row, record in zip(raw.row_numbers, raw.rows):
@@ -99,8 +101,19 @@ def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking:
             continue
         seen[pid] = row
         groups = {n: record[i].strip() for n, i in group_cols.items() if i is not None and record[i].strip()}
-        answers += _row_answers(raw, record, row, pid, cols, groups)
+        answers += _row_answers(raw, record, row, pid, cols, groups, reading)
     return answers, exclusions
+
+
+def _choice_text(raw: RawFile, finished: int | None, status: int | None) -> bool:
+    """Whether the export holds choice text rather than numeric values: Qualtrics writes ``Finished`` as
+    True/False and ``Status`` as "IP Address"… in a choice-text export, as 1/0 and codes in a numeric one."""
+    for record in raw.rows:
+        for i, text_values in ((finished, ("true", "false")), (status, None)):
+            cell = record[i].strip().lower() if i is not None and i < len(record) else ""
+            if cell and (cell in text_values if text_values else not cell.isdigit()):
+                return True
+    return False
 
 
 def _row_problem(raw: RawFile, record: list[str], finished: int | None, status: int | None):
@@ -115,7 +128,7 @@ def _row_problem(raw: RawFile, record: list[str], finished: int | None, status: 
     return None
 
 
-def _row_answers(raw, record, row, pid, cols: QualtricsColumns, groups) -> list[Answer]:
+def _row_answers(raw, record, row, pid, cols: QualtricsColumns, groups, reading: str) -> list[Answer]:
     order = _display_order(raw, record, cols)
     answers: dict[tuple[str, int | None], Answer] = {}
     for i, (sid, rep, pos) in cols.questions.items():
@@ -124,10 +137,12 @@ def _row_answers(raw, record, row, pid, cols: QualtricsColumns, groups) -> list[
             continue
         trial = order.get(raw.columns[i].lower()) or order.get(str(raw.import_ids[i].get("ImportId", "")).lower())
         if pos is None:
-            answers[(raw.columns[i], None)] = Answer(row, pid, sid, value, raw.columns[i], rep, trial, groups=groups)
+            answers[(raw.columns[i], None)] = Answer(row, pid, sid, value, raw.columns[i], rep, trial, groups=groups,
+                                                     reading=reading)
             continue
         base = raw.columns[i].rsplit("_", 1)[0]
-        answer = answers.setdefault((base, rep), Answer(row, pid, sid, "", base, rep, trial, ranks=[], groups=groups))
+        answer = answers.setdefault((base, rep), Answer(row, pid, sid, "", base, rep, trial, ranks=[], groups=groups,
+                                                        reading=reading))
         answer.ranks.extend([""] * (pos - len(answer.ranks)))
         answer.ranks[pos - 1] = value
     return list(answers.values())

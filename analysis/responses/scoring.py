@@ -15,6 +15,8 @@ value — a level may well be called ``3`` or ``B`` (point-light strengths ``3``
   A level name is accepted only where it cannot be read as a position (it is no position label, side or
   number); a value that reads as two different positions (a position label that is a number other than its
   own position) is outside the scale.
+- ``LABEL`` — a Qualtrics choice-text export: as ``CHOICE`` for choices; a Likert value is the scale label
+  first, so a scale labelled ``0``…``4`` is read by its labels (the numeric export's recodes are 1…k).
 - ``LEVEL`` — the long format's ``response``: the chosen level's name. A position label or side is read as a
   position only if no level is called like one, and a number only if no level name is a number.
 
@@ -35,8 +37,9 @@ from __future__ import annotations
 import re
 
 CHOICE = "choice"   # a survey's answer option: number = 1-based position, text = its position label
+LABEL = "label"     # a Qualtrics choice-text export: the answer option's text, even when it looks like a number
 LEVEL = "level"     # the long format: the chosen level's name
-READINGS = (CHOICE, LEVEL)
+READINGS = (CHOICE, LABEL, LEVEL)
 
 
 class OutsideScale(ValueError):
@@ -55,15 +58,22 @@ def _integer(text: str) -> int | None:
     return int(number) if number.is_integer() else None
 
 
-def score_likert(value: str, labels: list[str], k: int | None = None) -> int:
-    """Rating 1…k from a number or a scale label."""
+def score_likert(value: str, labels: list[str], k: int | None = None, reading: str = CHOICE) -> int:
+    """Rating 1…k from a number or a scale label. A choice-text export (``LABEL``) names the label, so a
+    scale labelled ``0``…``4`` reads ``3`` as its fourth point; elsewhere a number is the rating itself.
+
+    >>> score_likert("3", ["0", "1", "2", "3", "4"], reading=LABEL), score_likert("3", ["0", "1", "2", "3", "4"])
+    (4, 3)
+    """
     k = k or len(labels)
+    names = {_norm(label): i + 1 for i, label in enumerate(labels)}
+    if reading == LABEL and _norm(value) in names:
+        return names[_norm(value)]
     number = _integer(value)
     if number is not None:
         if 1 <= number <= k:
             return number
         raise OutsideScale(f"{value!r} is outside 1…{k}")
-    names = {_norm(label): i + 1 for i, label in enumerate(labels)}
     if _norm(value) in names:
         return names[_norm(value)]
     raise OutsideScale(f"{value!r} is neither 1…{k} nor one of the labels {labels}")
@@ -89,6 +99,7 @@ def _position(token: str, arrangement: list[str], position_labels: list[str], re
     """1-based screen position an answer names, read as ``reading`` says (see the module docstring)."""
     if reading not in READINGS:
         raise ValueError(f"unknown reading {reading!r}")
+    reading = CHOICE if reading == LABEL else reading   # a choice's text is its position label or side
     k = len(arrangement)
     text = _norm(token)
     levels = [_norm(level) for level in arrangement]

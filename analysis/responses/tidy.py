@@ -146,7 +146,7 @@ def _outside_detail(answers: list[Answer], repetitions: int) -> str:
 def _score(a: Answer, design: DesignInfo) -> dict:
     """The answer's score; what a choice value means is fixed by its source (``a.reading``), not guessed."""
     if design.response_type == "likert":
-        score = {"rating": score_likert(a.value, design.labels, design.k)}
+        score = {"rating": score_likert(a.value, design.labels, design.k, a.reading)}
     elif design.response_type == "afc":
         arrangement = design.arrangement(a.stimulus_id)
         chosen, position = score_choice(a.value, arrangement, design.position_labels, a.reading)
