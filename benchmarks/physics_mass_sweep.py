@@ -14,8 +14,16 @@ jog`` sweeps the jog (its own gains) instead of the walk.
 
 ``--gain-scales 0.03,0.01`` sweeps other gain scales (the shipped set is 1, 0.25, 0.1).
 
+``--balance-offset`` asks whether the paper's balance point (§4.2, Fig. 6) could lower the heavier
+actors' knees: each of the protocol's test actors of the sex walks at the shipped gains, once as
+shipped and once with its root target moved by ``--offset-scale`` × the vertical part of its own
+``C − C′`` (``inertia.paper_com_shift``: where Table 1 puts the CoM against the uniform-density
+body; lean bodies' Table-1 CoM sits 1–2 cm above, the heaviest men's below), so that a root force
+placing the balance point would lower or raise the pelvis by that much.
+
     python benchmarks/physics_mass_sweep.py [--sex F|M] [--gait walk|jog] [--gain-scales S,...]
                                             [--strength [--margin 1.0]]
+                                            [--balance-offset [--offset-scale 1.0]]
 """
 
 from __future__ import annotations
@@ -38,8 +46,14 @@ def main() -> None:
     parser.add_argument("--strength", action="store_true", help="limit torques to the own-weight peaks")
     parser.add_argument("--margin", type=float, default=1.0, help="limits = own-weight peaks × margin")
     parser.add_argument("--gain-scales", type=_scales, default=GAIN_SCALES, help="comma-separated k_p factors")
+    parser.add_argument("--balance-offset", action="store_true",
+                        help="each test actor with its root target moved by its own C − C′ (vertical)")
+    parser.add_argument("--offset-scale", type=float, default=1.0, help="multiplies the balance offset")
     args = parser.parse_args()
     sex, gait = args.sex, args.gait
+    if args.balance_offset:
+        balance_offsets(sex, gait, args.offset_scale)
+        return
 
     from stimuli.bodies import fit_body
     from stimuli.motion.average import protocol_average
@@ -67,6 +81,35 @@ def main() -> None:
         gains = dataclasses.replace(shipped, k_p=shipped.k_p * scale, k_d=shipped.k_d * np.sqrt(scale))
         for factor in WEIGHT_FACTORS:
             print_row(f"{scale:>6.2f}", own * factor, run(motion, body, own * factor, gains), start, n_cycles)
+
+
+def balance_offsets(sex: str, gait: str, scale: float) -> None:
+    """Knee peaks of every test actor of ``sex``, as shipped and with the balance offset."""
+    from unittest import mock
+
+    import stimuli.physics.simulate as simulate_module
+    from stimuli.bodies import fit_body
+    from stimuli.physics import Gains, inertia
+    from stimuli.physics.analysis_fig7 import reference_heel_strike_s
+    from stimuli.physics.protocol_step import nocom_motion
+    from stimuli.protocol import load_protocol
+
+    protocol = load_protocol(PROTOCOL)
+    motion = nocom_motion(protocol, sex, gait, None)   # as the physics step makes it
+    start, n_cycles = reference_heel_strike_s(motion), int(motion.metadata.get("cycles", 2))
+    gains = Gains.load(gait=gait)
+    lift = simulate_module.ground_offset
+    print(f"{sex} test actors, NoCOM {gait}, shipped gains; offset = {scale:g} × (C − C′) vertical")
+    print(f"{'actor':>6}{'BMI':>7}{'mm':>7}{'swing°':>8}{'ref':>7}{'Δ':>7}{'stance°':>9}{'ref':>7}{'Δ':>7}{'rms°':>7}  fell")
+    for actor in (a for a in protocol.actors if a.sex == sex and not a.practice_only):
+        body = fit_body(sex, actor.height_m, actor.bmi)
+        weight = float(body.anthropometry.mass_kg)
+        offset = scale * float(inertia.paper_com_shift(body.segments, weight)[1])
+        print_row(actor.id, actor.bmi, run(motion, body, weight, gains), start, n_cycles, extra=f"{0:>7.1f}")
+        # ground_offset lifts the root targets until the feet reach the floor, which would undo a
+        # shift of the targets themselves: the offset is added to the lift instead
+        with mock.patch.object(simulate_module, "ground_offset", lambda model, ref: lift(model, ref) + offset):
+            print_row("", actor.bmi, run(motion, body, weight, gains), start, n_cycles, extra=f"{offset * 1000:>+7.1f}")
 
 
 def _scales(text: str) -> tuple[float, ...]:
@@ -103,17 +146,18 @@ def torque_peaks(result, margin: float) -> dict[str, tuple[float, float]]:
             for name, low, high in zip(sim.dof_names, sim.actuator_force.min(axis=0), sim.actuator_force.max(axis=0))}
 
 
-def print_row(label: str, weight_kg: float, result, start: float, n_cycles: int) -> None:
+def print_row(label: str, value: float, result, start: float, n_cycles: int, extra: str = "") -> None:
+    """One table row: ``label``, ``value`` (kg or BMI), ``extra`` (pre-formatted), then the peaks."""
     from stimuli.physics.analysis_fig7 import gait_curves
 
     sim, ragdoll, rms = result
     if sim.fell:
-        print(f"{label:>6}{weight_kg:>7.1f}  fell at {sim.fall_time_s:.2f} s: {sim.fall_reason}")
+        print(f"{label:>6}{value:>7.1f}{extra}  fell at {sim.fall_time_s:.2f} s: {sim.fall_reason}")
         return
     c = gait_curves(sim, ragdoll, n_cycles, start)
     ref = np.array(c["reference_knee_flexion_deg"])
     ref_stance = float(ref[:41].max())
-    print(f"{label:>6}{weight_kg:>7.1f}{c['knee_flexion_peak_deg']:>8.2f}{ref.max():>7.2f}"
+    print(f"{label:>6}{value:>7.1f}{extra}{c['knee_flexion_peak_deg']:>8.2f}{ref.max():>7.2f}"
           f"{c['knee_flexion_peak_change_deg']:>+7.2f}{c['knee_flexion_stance_peak_deg']:>9.2f}{ref_stance:>7.2f}"
           f"{c['knee_flexion_stance_peak_deg'] - ref_stance:>+7.2f}{rms:>7.2f}  no")
 

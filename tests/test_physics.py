@@ -67,6 +67,15 @@ def test_balance_factor_zero_for_reference_and_grows_with_weight_gap(bodies):
     assert b(bodies["lo"]) > 0 and b(bodies["hi"]) > 0
 
 
+def test_paper_com_shift_is_the_literal_b_and_ordered_by_bmi(bodies):
+    """b of §4.2 read literally is |C − C′|; Table 1 lifts a lean woman's CoM more than a heavy one's."""
+    shift = {k: inertia.paper_com_shift(b.segments, b.anthropometry.mass_kg) for k, b in bodies.items()}
+    for key, body in bodies.items():
+        assert np.linalg.norm(shift[key]) == pytest.approx(
+            inertia.paper_balance_factor(body.segments, body.anthropometry.mass_kg), abs=1e-15)
+    assert shift["lo"][1] < shift["hi"][1] < 0   # C′ above C, by more for the lean body (m)
+
+
 @pytest.mark.parametrize("weight, height", [(0.0, 1.7), (-5.0, 1.7), (400.0, 1.8), (25.0, 1.9), (float("nan"), 1.7)])
 def test_non_physical_weights_are_rejected(weight, height):
     with pytest.raises(StimuliError, match="weight"):

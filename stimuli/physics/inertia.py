@@ -117,10 +117,15 @@ def paper_balance_factor(segments, weight_kg: float) -> float:
     the mesh-volume masses at the geometric centres, what a body-shaped ragdoll has before Table 1
     is applied) and ``C′ = Σ c′_i m′_i / Σ m′_i`` with ``c′ = c + l·X_l``, ``m′ = W·X_w``.
     """
+    return float(np.linalg.norm(paper_com_shift(segments, weight_kg)))
+
+
+def paper_com_shift(segments, weight_kg: float) -> np.ndarray:
+    """``C − C′`` (3,) of :func:`paper_balance_factor`, in the body's rest frame (metres)."""
     m = np.array([s.mass_volume_kg for s in segments], float)
     c = np.stack([np.asarray(s.com_geometric, float) for s in segments])
     original = (m[:, None] * c).sum(0) / m.sum()
-    return float(np.linalg.norm(original - whole_body_com(segment_masses(segments, weight_kg))))
+    return original - whole_body_com(segment_masses(segments, weight_kg))
 
 
 def capsule_inertia(mass: float, radius: float, half_length: float) -> np.ndarray:
