@@ -18,7 +18,9 @@ Counterbalancing rules (all seeded, so the same protocol + seed gives the same l
 - practice: ``practice.per_block`` clips drawn from the block's practice pool, whole shuffled copies of
   the pool first when it asks for more (copies numbered repetition 2, 3, …);
 - side-by-side/row placement of an ``alternatives`` factor: ``within`` shows every arrangement to
-  everyone; ``between`` rotates arrangements over participants so every position is balanced;
+  everyone; ``between`` rotates arrangements over participants so every position is balanced over
+  every k participants (:func:`arrangement_index`); with three or more levels the arrangements are
+  shuffled by the protocol's seed (:func:`arrangements`), so no row keeps the declared order;
 - test trial order within a block (``blocks.trials``): ``random`` (the default) shuffles per participant
   with no stimulus twice in a row (when that is possible); ``fixed`` keeps the declared order of the
   factor levels (``test_stimuli``'s order: the first-declared factor varies slowest, screen
@@ -99,17 +101,66 @@ def _safe(text: str) -> str:
 
 
 def arrangements(protocol: Protocol) -> list[tuple[str, ...]]:
-    """Screen orders of the alternatives factor's levels (``[()]`` when there is none)."""
+    """Screen orders of the alternatives factor's levels (``[()]`` when there is none).
+
+    ``latin_square``: k rows, each level once in each position. With three or more levels the
+    square is a cyclic one with its columns and symbols shuffled by the protocol's seed: the
+    plain cyclic rows (0.5 12 23.5 …, 12 23.5 … 0.5) keep the levels in rising order, wrapped,
+    so a viewer could pick a level by its neighbours; from four levels on, no row keeps the
+    levels in rising or falling order, wrapped or not. ``all``: every permutation, grouped in
+    runs of k that are Latin squares (one permutation's k cyclic symbol shifts), the runs in
+    seeded order: :func:`arrangement_index` deals one run to every k participants.
+
+    >>> from stimuli.protocol import load_protocol
+    >>> rows = arrangements(load_protocol("protocols/thesis_pointlight.yaml"))
+    >>> len(rows), all(sorted(col) == sorted(rows[0]) for col in zip(*rows))
+    (6, True)
+    """
     alternatives = protocol.factors_with_role("alternatives")
     if not alternatives:
         return [()]
     levels = alternatives[0].levels
+    k = len(levels)
     kind = protocol.alternatives.arrangements
     if kind == "fixed":
         return [tuple(levels)]
+    if k < 3:  # both orders of two levels: nothing to hide, and existing designs stay as they were
+        return [tuple(levels[(i + j) % k] for j in range(k)) for i in range(k)] if kind == "latin_square" \
+            else list(itertools.permutations(levels))
+    rng = np.random.default_rng(protocol.seed)
     if kind == "latin_square":
-        return [tuple(levels[(i + j) % len(levels)] for j in range(len(levels))) for i in range(len(levels))]
-    return list(itertools.permutations(levels))
+        while True:  # redrawn while a row keeps the levels in rank order (every order of 3 does)
+            symbols, columns = rng.permutation(k), rng.permutation(k)
+            rows = [tuple(levels[symbols[(columns[j] + i) % k]] for j in range(k)) for i in range(k)]
+            if k < 4 or not set(rows) & _rotations(levels):
+                return rows
+    symbols = rng.permutation(k)
+    starts = [(0, *rest) for rest in itertools.permutations(range(1, k))]
+    return [tuple(levels[symbols[(starts[r][j] + i) % k]] for j in range(k))
+            for r in rng.permutation(len(starts)) for i in range(k)]
+
+
+def _rotations(levels: list[str]) -> set[tuple[str, ...]]:
+    """The declared order and its reverse, each rotated: rows that keep the levels in rank order."""
+    return {tuple(order[i:] + order[:i]) for order in (list(levels), list(levels)[::-1]) for i in range(len(levels))}
+
+
+def arrangement_index(n_arrangements: int, k: int, rank: int, condition: int) -> int:
+    """Which of :func:`arrangements` participant ``rank`` (0-based, within the group) sees for the
+    ``condition``-th condition when arrangements are counterbalanced between participants.
+
+    Every k consecutive ranks get one run of k arrangements (a Latin square), each condition a
+    different arrangement, so each level is equally often in each position over every k
+    participants. (Taking the permutations in order, 60 participants would all have seen the
+    first level leftmost: the first 120 of the 720 orders of 6 start with it.)
+
+    >>> [arrangement_index(6, 3, rank, 0) for rank in range(6)]
+    [0, 1, 2, 3, 4, 5]
+    >>> [arrangement_index(3, 3, rank, 1) for rank in range(3)]
+    [1, 2, 0]
+    """
+    runs = max(1, n_arrangements // k)
+    return (rank // k + condition) % runs * k + (rank + condition) % k
 
 
 def _actors_for(protocol: Protocol, levels: dict[str, str]) -> tuple[str, str]:
@@ -336,7 +387,8 @@ def _matches(stimulus: Stimulus, cell: dict[str, str]) -> bool:
 
 
 def _participant_trials(protocol, participant, rank, groups, blocks, tests, practices, familiar, rng):
-    n_arrangements = len(arrangements(protocol))
+    shown = {arrangement: i for i, arrangement in enumerate(arrangements(protocol))}
+    n_arrangements, k = len(shown), len(next(iter(shown)))
     between_arrangement = protocol.alternatives.counterbalance == "between" and n_arrangements > 1
     conditions = list(dict.fromkeys(s.condition_id for s in tests))
     trials, number = [], 0
@@ -359,8 +411,8 @@ def _participant_trials(protocol, participant, rank, groups, blocks, tests, prac
         block_tests = [s for s in tests if _matches(s, scope)]
         if between_arrangement:  # one arrangement per condition, rotated over participants
             block_tests = [s for s in block_tests
-                           if arrangements(protocol).index(s.arrangement)
-                           == (rank + conditions.index(s.condition_id)) % n_arrangements]
+                           if shown[s.arrangement]
+                           == arrangement_index(n_arrangements, k, rank, conditions.index(s.condition_id))]
         ids = [s.stimulus_id for s in block_tests] * protocol.repetitions   # declared order, once per repetition
         for sid, repetition in _numbered(ids if protocol.blocks.trials == "fixed" else shuffle_no_repeats(ids, rng)):
             add(sid, position, repetition, "test")

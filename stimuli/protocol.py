@@ -250,8 +250,9 @@ class Display(Strict):
 class Alternatives(Strict):
     """Counterbalancing of the positions of an ``alternatives`` factor's levels on screen.
 
-    ``arrangements``: ``all`` (every permutation), ``latin_square`` (k cyclic shifts, each level
-    once in each position), ``fixed`` (the declared order only). ``counterbalance``: ``within``
+    ``arrangements``: ``all`` (every permutation), ``latin_square`` (k orders, each level
+    once in each position; shuffled by ``seed`` from three levels on, see
+    :func:`stimuli.design.arrangements`), ``fixed`` (the declared order only). ``counterbalance``: ``within``
     (every participant sees every arrangement) or ``between`` (each participant sees one
     arrangement per condition, rotated so positions balance over participants).
     """

@@ -7,7 +7,7 @@ from collections import Counter
 import pandas as pd
 import pytest
 
-from stimuli.design import build_design, shuffle_no_repeats, williams_orders
+from stimuli.design import arrangements, build_design, shuffle_no_repeats, williams_orders
 from stimuli.protocol import load_protocol
 
 
@@ -131,6 +131,44 @@ def test_thesis_protocols_balance_positions():
     validation = build_design(load_protocol("protocols/thesis_validation.yaml"))
     assert [s.arrangement for s in validation.stimuli] == [("lean_mocap", "keyframed", "modifier", "obese_mocap")]
     assert len(validation.trials) == 96
+
+
+def test_pointlight_rows_are_a_shuffled_latin_square():
+    """The thesis randomised the six walkers "so that participants would not be able to select the lean
+    walker through relative ordering"; the rows used to be the rising order 0.5 … 58, rotated."""
+    protocol = load_protocol("protocols/thesis_pointlight.yaml")
+    rows = arrangements(protocol)
+    levels = tuple(protocol.factors_with_role("alternatives")[0].levels)
+    rotations = {levels[i:] + levels[:i] for i in range(len(levels))}
+    assert len(rows) == 6 and not rotations & set(rows) and not {r[::-1] for r in rotations} & set(rows)
+    assert all(sorted(row) == sorted(levels) for row in rows)
+    assert all(sorted(column) == sorted(levels) for column in zip(*rows))   # each strength once per position
+    assert arrangements(protocol) == rows
+    assert arrangements(protocol.model_copy(update={"seed": protocol.seed + 1})) != rows
+
+
+def test_all_orders_between_participants_balance_positions(tmp_path):
+    """`arrangements: all` + `between`: 60 viewers of 6 walkers used to see 0.5 % leftmost in all 600
+    trials (the first 120 of the 720 permutations start with it)."""
+    text = open("protocols/thesis_pointlight.yaml").read().replace("arrangements: latin_square", "arrangements: all")
+    (tmp_path / "all.yaml").write_text(text)
+    design = build_design(load_protocol(tmp_path / "all.yaml"))
+    by_id = {s.stimulus_id: s for s in design.stimuli}
+    assert len(design.stimuli) == 10 * 720
+    shown = [by_id[t.stimulus_id] for t in design.trials]
+    for position in range(6):
+        counts = Counter((s.levels["PARAMETER"], s.arrangement[position]) for s in shown)
+        assert set(counts.values()) == {10}, position
+    assert len({s.arrangement for s in shown}) > 6   # not one Latin square for everyone
+
+
+def test_design_docstring_examples():
+    import doctest
+
+    import stimuli.design
+
+    result = doctest.testmod(stimuli.design)
+    assert result.attempted >= 4 and result.failed == 0
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 6])

@@ -32,14 +32,16 @@ def _stimulus(protocol, part: str):
 
 
 def _setup(protocol_path, parameter: str, resolution="960x270", fps=10, duration=2.0):
-    """(protocol, stimulus with strengths in declared order, look, figures) of one PARAMETER level."""
+    """(protocol, stimulus with strengths in declared order, look, figures) of one PARAMETER level.
+
+    The design shows the strengths in shuffled orders; the renderer draws any order, and these
+    tests read walker k as strength k."""
     from stimuli.protocol import load_protocol
     from stimuli.render.settings import look_for
     from stimuli.render.sources import protocol_figures
 
     protocol = load_protocol(protocol_path("thesis_pointlight"))
-    stimulus = _stimulus(protocol, f"{parameter}-0.5_12_23.5_35_46.5_58")
-    assert stimulus.arrangement == STRENGTHS
+    stimulus = dataclasses.replace(_stimulus(protocol, f"{parameter}-"), arrangement=STRENGTHS)
     look = dataclasses.replace(look_for(protocol, stimulus, resolution=resolution, fps=fps), duration_s=duration)
     return protocol, stimulus, look, protocol_figures(protocol, stimulus, look)
 
@@ -102,7 +104,7 @@ def test_point_light_row_through_the_renderer(protocol_path, tmp_path):
     from stimuli.render.video import read_video
 
     src = _short_copy(protocol_path("thesis_pointlight"), tmp_path / "pl.yaml")
-    report = render_protocol(src, tmp_path / "out", resolution="160x90", fps=5, only="speed_cadence-0.5_12",
+    report = render_protocol(src, tmp_path / "out", resolution="160x90", fps=5, only="speed_cadence-", limit=1,
                              workers=1, progress=False, sheet=False)
     assert len(report.rendered) == 1 and not report.failed
     frames = read_video(tmp_path / "out" / "clips" / f"{report.rendered[0]}.mp4")[0]
