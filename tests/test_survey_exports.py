@@ -268,3 +268,26 @@ def test_missing_jspsych_install_is_a_user_error(tmp_path, run_cli, monkeypatch)
     assert code == 2 and "npm ci" in err and not (tmp_path / "js").exists()
     results = export_all(folder, tmp_path / "all")
     assert "jsPsych is not installed" in results[2].notes[0] and (tmp_path / "all" / "survey.qsf").exists()
+
+
+def test_survey_plan_rotations_show_what_the_design_deals(tmp_path):
+    """Qualtrics/PsychoPy rotations follow the design's arrangement rule; with `arrangements: all` the
+    design deals Latin-square runs (stimuli.design.arrangement_index), which the plan used to ignore."""
+    from stimuli.survey.plan import build_plan
+
+    text = (ROOT / "protocols" / "thesis_pointlight.yaml").read_text()
+    for old, new in (('levels: ["0.5", "12", "23.5", "35", "46.5", "58"]', 'levels: ["0.5", "12", "23.5"]'),
+                     ("labels: [A, B, C, D, E, F]", "labels: [A, B, C]"),
+                     ("arrangements: latin_square", "arrangements: all"), ("participants: 60", "participants: 12")):
+        assert old in text
+        text = text.replace(old, new)
+    folder = design_folder(tmp_path, "three", text)
+    design = json.loads((folder / "design.json").read_text())
+    rotations = build_plan(load_source(folder))[0].rotations
+    assert len(rotations) == 6
+    with open(folder / "trials.csv", newline="") as handle:
+        trials = list(csv.DictReader(handle))
+    for participant in range(1, design["participants"] + 1):
+        dealt = {t["stimulus_id"] for t in trials if int(t["participant"]) == participant and t["kind"] == "test"}
+        planned = {s.stimulus_id for block in rotations[(participant - 1) % 6].blocks for s, _ in block.tests}
+        assert dealt == planned, participant

@@ -5,8 +5,9 @@ time. This module states what they randomise over, with the same rules as :mod:`
 
 - each cell of the between factors is one **group** (assigned evenly);
 - when an ``alternatives`` factor is counterbalanced *between* participants, each group splits into
-  ``k`` **rotations**; rotation ``r`` shows condition ``c`` in arrangement ``(r + c) mod k`` (the
-  design's rule, with ``r`` the participant's rank in the group);
+  one **rotation** per arrangement; rotation ``r`` shows condition ``c`` in the arrangement
+  :func:`stimuli.design.arrangement_index` gives participant rank ``r`` (the design's rule; for a
+  Latin square ``(r + c) mod k``);
 - each rotation holds the protocol's **blocks** in declared order, each with its familiarisation
   clips (in the design's order), its practice pool (and how many to draw) and its test questions
   (every test stimulus × repetition, repetition by repetition in declared order: the design's own
@@ -18,7 +19,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass, field
 
-from stimuli.design import arrangements, block_cells, block_label
+from stimuli.design import arrangement_index, arrangements, block_cells, block_label
 from stimuli.survey.source import StimulusInfo, SurveySource
 
 
@@ -81,10 +82,10 @@ def _block(source: SurveySource, groups: dict, cell: dict, rotation: int | None)
     practice = [s for s in source.of_kind("practice") if _matches(s, scope)]
     tests = [s for s in source.of_kind("test") if _matches(s, scope)]
     if rotation is not None:
-        order = arrangements(p)
+        order = {arrangement: i for i, arrangement in enumerate(arrangements(p))}
         conditions = list(dict.fromkeys(s.condition_id for s in source.of_kind("test")))
-        tests = [s for s in tests
-                 if order.index(s.arrangement) == (rotation + conditions.index(s.condition_id)) % len(order)]
+        tests = [s for s in tests if order[s.arrangement] == arrangement_index(
+            len(order), len(s.arrangement), rotation, conditions.index(s.condition_id))]
     questions = [(s, rep) for rep in range(1, p.repetitions + 1) for s in tests]
     count = p.practice.per_block if practice else 0
     return BlockPlan(block_label(cell), cell, fam, practice, count, questions)
