@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -104,6 +105,9 @@ def fit_body(sex, height_m, bmi, *, waist_m=None, hip_m=None, chest_m=None, age_
         body = _fit_new(targets, body_id)
         if use_cache:
             cache.save(body, key)
+    elif not body.fit.reachable:   # the cached message names the body it was first fitted as
+        body.fit = dataclasses.replace(body.fit, message=_unreachable_message(
+            body_id, targets, targets.height_m + body.fit.height_error_m, targets.bmi + body.fit.bmi_error))
     if not body.fit.reachable and on_unreachable == "raise":
         raise BodyFitError(body.fit.message, nearest=body)
     return body
@@ -119,16 +123,21 @@ def _fit_new(targets: Targets, body_id: str) -> Body:
     out = backend.evaluate(phenotypes(targets, x, names))
     height_err = result.measured["height_m"] - targets.height_m
     bmi_err = result.measured["bmi"] - targets.bmi
-    message = "" if result.reachable else (
-        f"body {body_id}: {targets.sex} height {targets.height_m:.3f} m, BMI {targets.bmi:.1f} is out of reach of "
-        f"the Anny body model (tolerance ±{HEIGHT_TOLERANCE_M * 100:.0f} cm, ±{BMI_TOLERANCE} BMI); the nearest "
-        f"body has height {result.measured['height_m']:.3f} m and BMI {result.measured['bmi']:.1f}")
+    message = "" if result.reachable else _unreachable_message(body_id, targets, result.measured["height_m"],
+                                                               result.measured["bmi"])
     report = FitReport(reachable=result.reachable, height_error_m=height_err, bmi_error=bmi_err,
                        seconds=time.perf_counter() - start, cached=False, iterations=result.iterations,
                        message=message)
     target_dict = {"height_m": targets.height_m, "bmi": targets.bmi, "waist_m": targets.waist_m,
                    "hip_m": targets.hip_m, "chest_m": targets.chest_m}
     return build_body(body_id, targets.sex, target_dict, result.phenotype, out, 0, report)
+
+
+def _unreachable_message(body_id: str, targets: Targets, height_m: float, bmi: float) -> str:
+    """What BodyFitError says about a target out of reach, whose nearest body measures ``height_m``, ``bmi``."""
+    return (f"body {body_id}: {targets.sex} height {targets.height_m:.3f} m, BMI {targets.bmi:.1f} is out of reach of "
+            f"the Anny body model (tolerance ±{HEIGHT_TOLERANCE_M * 100:.0f} cm, ±{BMI_TOLERANCE} BMI); the nearest "
+            f"body has height {height_m:.3f} m and BMI {bmi:.1f}")
 
 
 def body_for_actor(actor, **kwargs) -> Body:

@@ -21,6 +21,7 @@ Examples
 from __future__ import annotations
 
 import copy
+import io
 import json
 import zipfile
 from dataclasses import dataclass, field
@@ -170,20 +171,22 @@ class Motion:
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | Path) -> Path:
-        """Write the ``.npz`` contract (atomically: temporary name, then rename)."""
+        """Write the ``.npz`` contract (atomically: a temporary file of this process, then rename).
+
+        The temporary name is unique: with one fixed name, two processes saving the same file (two
+        physics runs sharing the cache) wrote into one temporary file, and a reader could find the
+        motion empty while the other process was still writing it.
+        """
+        from stimuli.fileio import atomic_write_bytes
+
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        try:
-            np.savez_compressed(
-                tmp, fps=np.float64(self.fps), joint_names=np.array(self.joint_names, dtype=str),
-                parents=self.parents.astype(np.int32), offsets=self.offsets,
-                rotations=self.rotations, root_translation=self.root_translation,
-                metadata=np.array(json.dumps(self.metadata, sort_keys=True, default=_json_default)))
-            tmp.replace(path)
-        except BaseException:  # e.g. ``path`` is a folder: leave no temporary file behind
-            tmp.unlink(missing_ok=True)
-            raise
+        buffer = io.BytesIO()   # the same bytes as a file would get (zip entries carry no time)
+        np.savez_compressed(
+            buffer, fps=np.float64(self.fps), joint_names=np.array(self.joint_names, dtype=str),
+            parents=self.parents.astype(np.int32), offsets=self.offsets,
+            rotations=self.rotations, root_translation=self.root_translation,
+            metadata=np.array(json.dumps(self.metadata, sort_keys=True, default=_json_default)))
+        atomic_write_bytes(path, buffer.getvalue())   # e.g. ``path`` is a folder: no temporary file left
         return path
 
     @classmethod

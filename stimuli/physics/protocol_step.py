@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from stimuli.errors import StimuliError
-from stimuli.fileio import source_digest
+from stimuli.fileio import atomic_write_text, source_digest
 
 
 
@@ -130,7 +130,9 @@ def _job(args: dict) -> dict:
             report[key] = curves[key]
         result.motion.metadata.update(actor=args["actor"], gait=args["gait"])
         result.motion.save(args["out_motion"])
-    Path(args["out_report"]).write_text(json.dumps(report, indent=1, sort_keys=True))
+    # The report marks the entry finished, so it is written whole or not at all: written in place, a
+    # write cut short (a full disk, a kill) left a truncated report that every later run failed to read.
+    atomic_write_text(args["out_report"], json.dumps(report, indent=1, sort_keys=True))
     return report
 
 
@@ -184,8 +186,11 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     for job in cached + jobs:
         report = json.loads(Path(job["out_report"]).read_text())
         shutil.copyfile(job["out_report"], out / "reports" / f"{job['name']}.json")
+        com = out / "motions" / f"{job['name']}.npz"
         if Path(job["out_motion"]).is_file():
-            shutil.copyfile(job["out_motion"], out / "motions" / f"{job['name']}.npz")
+            shutil.copyfile(job["out_motion"], com)
+        else:   # it fell: an earlier run's COM motion left here would be rendered (--motions) as this one's
+            com.unlink(missing_ok=True)
         reports.append(report)
     figures = _figures(protocol, reports, out, plot_fig7)
     _summary(reports, out / "summary.csv")

@@ -14,7 +14,8 @@ from stimuli.errors import StimuliError
 from stimuli.fileio import source_digest
 from stimuli.render.clip import Look
 
-# Bump when a change to the renderer changes pixels: every clip is then rendered again.
+# Bump to render every clip again for a reason the code does not show (e.g. another pyrender or
+# ffmpeg); a change to the renderer's own code does it by itself (upstream_digest).
 RENDER_VERSION = "4"
 QUICK_WIDTH, QUICK_FPS = 320, 15
 
@@ -82,12 +83,14 @@ def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False)
 
 @functools.lru_cache(maxsize=1)
 def upstream_digest() -> str:
-    """SHA-256 of the code and bundled data that make bodies and motions (and the renderer's shaders).
+    """SHA-256 of the code and bundled data that make bodies, motions and pixels (the renderer and its shaders).
 
-    A change to the generator, the retargeting or the body fitter changes every clip's inputs,
-    so a resumed render does not keep clips made by the old code.
+    A change to the generator, the retargeting, the body fitter or the renderer changes clips, so a
+    resumed render does not keep clips made by the old code. The renderer's own modules are part of
+    it: with only :data:`RENDER_VERSION` to bump by hand, a new body colour kept every clip of the
+    old one.
     """
-    return source_digest("bodies", "motion", "physics", "data", "render/shaders")
+    return source_digest("bodies", "motion", "physics", "data", "render", "render/shaders")
 
 
 def files_digest(paths) -> str:
@@ -100,9 +103,12 @@ def files_digest(paths) -> str:
 
 
 def inputs_hash(protocol, stimulus, look: Look, motion_files=(), poses: str = "protocol") -> str:
-    """SHA-256 over everything a clip depends on: the stimulus, its actors, gaits, look, versions,
-    the upstream code (:func:`upstream_digest`), any motion files it reads and the pose source (only
-    when it is not the protocol's, so that the hashes of protocol renders stay as they were)."""
+    """SHA-256 over everything a clip depends on: the stimulus, its actors, gaits, the gait it shows,
+    look, versions, the upstream code (:func:`upstream_digest`), any motion files it reads, the
+    protocol's seed when it shows generated motions, and the pose source (only when it is not the
+    protocol's, so that the hashes of protocol renders stay as they were)."""
+    from stimuli.render.sources import gait_of, generator_seed
+
     actor_ids = {stimulus.body_actor, stimulus.motion_actor, protocol.display.body} - {"", None}
     payload = {
         "render_version": RENDER_VERSION,
@@ -115,7 +121,12 @@ def inputs_hash(protocol, stimulus, look: Look, motion_files=(), poses: str = "p
         "cycles": protocol.clip.cycles,
         "upstream": upstream_digest(),
         "motion_files": files_digest(motion_files),
+        # A stimulus without a gait level (familiarization) shows the first declared gait, which the
+        # sorted "gaits" above does not tell: reordering the gaits kept a walk where a jog was due.
+        "gait": gait_of(protocol, stimulus),
     }
     if poses != "protocol":  # a stepping-pose clip must not pass for the real one on the next render
         payload["poses"] = poses
+    elif (seed := generator_seed(protocol, stimulus)) is not None:
+        payload["seed"] = seed   # it draws each actor's style: another seed, another walk
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()

@@ -191,6 +191,28 @@ def motion_files(protocol, stimulus, motions_dir=None) -> list:
     return [Path(motions_dir) / _method_file(protocol, m, stimulus, gait, sex) for m in levels]
 
 
+def generator_seed(protocol, stimulus) -> int | None:
+    """The protocol's seed when the stimulus shows the motion generator's gaits (part of its inputs
+    hash: the seed draws each actor's individual style), else None (NoCOM/COM files, captures and
+    the lean base walk do not depend on it, so another seed keeps those clips).
+
+    >>> from stimuli.protocol import load_protocol
+    >>> from stimuli.design import build_design
+    >>> exp1 = load_protocol("protocols/exp1_shape_motion.yaml")
+    >>> generator_seed(exp1, build_design(exp1).stimuli[0])
+    2023
+    """
+    alternatives = protocol.factors_with_role("alternatives")
+    if not alternatives:
+        return protocol.seed   # actor_motion: the motion actor's generated walk or jog
+    factor = protocol.factor_mapped_to("source")
+    if alternatives[0].maps_to != "source" or factor is None:
+        return None
+    levels = stimulus.arrangement or factor.levels[:1]
+    generated = any(str(factor.level_settings.get(level, {}).get("motion") or "") == "generator" for level in levels)
+    return protocol.seed if generated else None
+
+
 def method_motion(protocol, method: str, stimulus, gait: str, body, look: Look, motions_dir=None):
     """NoCOM: the sex × gait average motion; COM: that motion retargeted by physics onto the body.
 

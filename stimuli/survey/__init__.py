@@ -84,6 +84,58 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
     return result
 
 
+def _refresh_jspsych(folder: Path, target: Path, video_base_url: str | None) -> ExportResult:
+    """Export jsPsych over an existing ``target``: kept as it is when the new export is the same files,
+    replaced when it differs and holds only files an export writes. Kept whatever its contents, it ran
+    the trials and clips of an earlier design while the exports beside it had the new ones. A folder
+    with files of its own (a lab's data script, collected data) is never touched."""
+    import shutil
+    import tempfile
+
+    foreign = _not_exported(target)
+    if foreign:
+        return ExportResult(target, "jspsych", [
+            f"{target} exists and holds files an export does not write (e.g. {foreign[0]}); left as it is, so it "
+            f"may show an earlier design's trials or clips: export into a new folder with 'shapemotion survey "
+            f"{folder} --format jspsych --out DIR'"])
+    old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=target.parent))
+    target.rename(old / target.name)
+    try:
+        result = export_survey(folder, "jspsych", target, video_base_url)
+    except BaseException:
+        if not target.exists():   # the export writes all or nothing: put the old folder back
+            (old / target.name).rename(target)
+        shutil.rmtree(old, ignore_errors=True)
+        raise
+    if _same_files(old / target.name, target):
+        shutil.rmtree(target)
+        (old / target.name).rename(target)
+        result = ExportResult(target, "jspsych", [f"{target} exists; left as it is"])
+    else:
+        result.notes.insert(0, f"{target} held an earlier export (other trials or clips); written again")
+    shutil.rmtree(old, ignore_errors=True)
+    return result
+
+
+def _not_exported(folder: Path) -> list[str]:
+    """Files in a jsPsych folder that :func:`stimuli.survey.jspsych.write_jspsych` does not write."""
+    from stimuli.survey.jspsych import LIBRARIES
+
+    if not folder.is_dir():
+        return [folder.name]
+    ours = {"index.html", "config.js", "experiment.js"} | {f"lib/{name}" for _, name in LIBRARIES}
+    files = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir())
+    return [f for f in files if f not in ours and not f.startswith("clips/")]
+
+
+def _same_files(a: Path, b: Path) -> bool:
+    """Whether two folders hold the same files with the same bytes."""
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    if files != sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file()):
+        return False
+    return all((a / f).read_bytes() == (b / f).read_bytes() for f in files)
+
+
 def practice_repeat_notes(source) -> list[str]:
     """Blocks whose practice shows more trials than clips: Qualtrics draws them from whole copies of the
     pool at random, so it may repeat a clip back to back, which ``trials.csv`` and jsPsych never do."""
@@ -114,7 +166,8 @@ def export_all(folder: str | Path, out_dir: str | Path | None = None,
     """Every format into ``out_dir`` (default ``folder/survey``), for ``render`` and ``demo``.
 
     The TXT's manual steps go to ``qualtrics_manual_steps.txt`` next to it. An existing jsPsych
-    folder is left alone (a note says so), and a missing jsPsych install (no ``npm ci``) skips that
+    folder is left alone when it is what this export writes (a note says so) and written again when
+    it is not (a new design or new clips), and a missing jsPsych install (no ``npm ci``) skips that
     format with a note instead of failing the whole export.
     """
     from stimuli.errors import StimuliError
@@ -123,11 +176,11 @@ def export_all(folder: str | Path, out_dir: str | Path | None = None,
     results = []
     for fmt, name in ALL_OUTPUTS.items():
         target = out_dir / name
-        if fmt == "jspsych" and target.exists():
-            results.append(ExportResult(target, fmt, [f"{target} exists; left as it is"]))
-            continue
         try:
-            result = export_survey(folder, fmt, target, video_base_url)
+            if fmt == "jspsych" and target.exists():
+                result = _refresh_jspsych(folder, target, video_base_url)
+            else:
+                result = export_survey(folder, fmt, target, video_base_url)
         except StimuliError as exc:
             if fmt != "jspsych" or "jsPsych is not installed" not in str(exc):
                 raise
