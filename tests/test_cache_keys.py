@@ -159,7 +159,7 @@ _FULL_DISK = textwrap.dedent('''
     fall = SimpleNamespace(report=report, sim=SimpleNamespace(fell=True))
     sys.modules["stimuli.physics.retarget"].retarget = lambda *args, **kwargs: fall
     args = dict(motion=sys.argv[1], out_report=sys.argv[2], out_motion=sys.argv[2] + ".npz", sex="F", height_m=1.6,
-                bmi=22.0, reference=[1.6, 22.0], weight_kg=56.3, actor="F_X", gait="walk")
+                bmi=22.0, girths={}, reference=[1.6, 22.0], weight_kg=56.3, actor="F_X", gait="walk")
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, (64 * 1024, resource.RLIM_INFINITY))
     try:
@@ -194,16 +194,17 @@ def _fallen_report(actor) -> dict:
             "fell": True, "fall_reason": "pelvis below 60% of its target height", "flight_fraction": 0.0}
 
 
-def test_a_com_motion_that_falls_removes_the_earlier_runs_file(tmp_path, monkeypatch):
-    """A second physics run into the same folder whose ragdoll falls (e.g. after retuned gains) kept the
-    first run's motions/COM_<actor>_<gait>.npz, which the renderer (--motions) then showed as the COM clip."""
-    from stimuli.errors import StimuliError
+def _small_exp2(tmp_path, monkeypatch, waist_of_f_hi1=None):
+    """Exp 2 cut to 2 actors per sex and the walk, its NoCOM walks in ``tmp/nocom``, every COM entry
+    cached as a fall (nothing to simulate); returns (protocol path, NoCOM folder, the job specs keyed)."""
     from stimuli.motion.style import actor_gait
     from stimuli.physics import protocol_step
     from stimuli.protocol import load_protocol
 
     data = yaml.safe_load((ROOT / "protocols" / "exp2_com_vs_average.yaml").read_text())
     data["actors"] = [a for a in data["actors"] if a["id"] in ("F_Hi1", "F_Lo2", "M_Hi1", "M_Lo2")]
+    if waist_of_f_hi1:
+        data["actors"][0]["waist_m"] = waist_of_f_hi1
     data["factors"] = [f for f in data["factors"] if f["name"] != "GAIT"]
     for factor in data["factors"]:
         if factor["name"] == "BODY":
@@ -221,10 +222,22 @@ def test_a_com_motion_that_falls_removes_the_earlier_runs_file(tmp_path, monkeyp
         walk.save(motions / f"{actor.sex}_walk.npz")
     cache = tmp_path / "cache"
     cache.mkdir()
+    specs = []
     monkeypatch.setattr(protocol_step, "cache_dir", lambda: cache)
-    monkeypatch.setattr(protocol_step, "_key", lambda motion, spec, gains: f"{spec['actor']}_{spec['gait']}")
+    monkeypatch.setattr(protocol_step, "_key",
+                        lambda motion, spec, gains: specs.append(spec) or f"{spec['actor']}_{spec['gait']}")
     for actor in protocol.actors:   # every entry cached, as a fall: nothing to simulate
         (cache / f"{actor.id}_walk.json").write_text(json.dumps(_fallen_report(actor)))
+    return path, motions, specs
+
+
+def test_a_com_motion_that_falls_removes_the_earlier_runs_file(tmp_path, monkeypatch):
+    """A second physics run into the same folder whose ragdoll falls (e.g. after retuned gains) kept the
+    first run's motions/COM_<actor>_<gait>.npz, which the renderer (--motions) then showed as the COM clip."""
+    from stimuli.errors import StimuliError
+    from stimuli.physics import protocol_step
+
+    path, motions, _ = _small_exp2(tmp_path, monkeypatch)
     out = tmp_path / "physics"
     earlier = out / "motions" / "COM_F_Hi1_walk.npz"
     shutil.copytree(motions, out / "motions")
@@ -233,6 +246,30 @@ def test_a_com_motion_that_falls_removes_the_earlier_runs_file(tmp_path, monkeyp
         protocol_step.run_protocol(path, out, motions_dir=motions)
     assert not earlier.exists()
     assert json.loads((out / "reports" / "COM_F_Hi1_walk.json").read_text())["fell"]
+
+
+def test_com_bodies_are_fitted_with_the_actors_girths(tmp_path, monkeypatch):
+    """The renderer shows an actor's body fitted with its girths (body_for_actor); the physics step
+    built the ragdoll from a body fitted to height and BMI alone, and its cache key ignored girths."""
+    from stimuli.errors import StimuliError
+    from stimuli.physics import protocol_step
+
+    path, motions, specs = _small_exp2(tmp_path, monkeypatch, waist_of_f_hi1=0.95)
+    with pytest.raises(StimuliError, match="fell"):
+        protocol_step.run_protocol(path, tmp_path / "physics", motions_dir=motions)
+    girths = {spec["actor"]: spec["girths"] for spec in specs}
+    assert girths == {"F_Hi1": {"waist_m": 0.95}, "F_Lo2": {}, "M_Hi1": {}, "M_Lo2": {}}
+    fitted = []
+
+    def fit_body(*args, **kwargs):
+        fitted.append(kwargs)
+        raise RuntimeError("fitted")
+
+    monkeypatch.setattr("stimuli.bodies.fit_body", fit_body)
+    spec = next(s for s in specs if s["actor"] == "F_Hi1")
+    with pytest.raises(RuntimeError, match="fitted"):
+        protocol_step._job(dict(spec, motion=str(motions / "F_walk.npz"), out_motion="", out_report=""))
+    assert fitted[0] == {"waist_m": 0.95}
 
 
 # -- survey exports (render's survey step, demo) --------------------------------------------------

@@ -107,6 +107,14 @@ def _key(motion_path: Path, actor: dict, gains_text: str) -> str:
     return h.hexdigest()[:20]
 
 
+def actor_girths(actor) -> dict[str, float]:
+    """The girths a protocol gives an actor (``waist_m``, ``hip_m``, ``chest_m``), which shape its body.
+
+    The renderer fits the actor's body with them (``body_for_actor``); the ragdoll must be built
+    from that body, not from one fitted to height and BMI alone."""
+    return {k: getattr(actor, k) for k in ("waist_m", "hip_m", "chest_m") if getattr(actor, k, None) is not None}
+
+
 def _job(args: dict) -> dict:
     """One actor × gait (runs in a worker process)."""
     from stimuli.bodies import fit_body
@@ -115,7 +123,7 @@ def _job(args: dict) -> dict:
     from stimuli.physics.retarget import retarget
 
     motion = Motion.load(args["motion"])
-    body = fit_body(args["sex"], args["height_m"], args["bmi"])
+    body = fit_body(args["sex"], args["height_m"], args["bmi"], **args["girths"])
     ref_body = fit_body(args["sex"], *args["reference"])
     result = retarget(motion, body, args["weight_kg"], reference_body=ref_body)
     report = result.report
@@ -169,7 +177,8 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
         nocom_path = motion.save(out / "nocom" / f"{sex}_{gait}.npz")
         for actor in (a for a in protocol.actors if a.sex == sex):
             spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
-                    "weight_kg": actor.weight_kg, "gait": gait, "reference": list(reference)}
+                    "girths": actor_girths(actor), "weight_kg": actor.weight_kg, "gait": gait,
+                    "reference": list(reference)}
             key = _key(nocom_path, spec, gains_text)
             job = dict(spec, motion=str(nocom_path), out_motion=str(cache / f"{key}.npz"),
                        out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}")
