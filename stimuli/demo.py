@@ -15,7 +15,7 @@ from stimuli.design import build_design, write_design
 from stimuli.protocol import load_protocol
 
 PROTOCOL_DIR = Path(__file__).resolve().parents[1] / "protocols"
-BUNDLED = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"]
+BUNDLED = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation"]
 RENDERED = ["exp1_shape_motion", "exp2_com_vs_average"]
 DEMO_RESOLUTION, DEMO_FPS = (480, 270), 30   # keeps the two paper sets to a few minutes on 2 cores
 

@@ -159,13 +159,13 @@ def _check_level_setting(factor: "Factor", level: str, key: str, value) -> None:
                                               and value[4:].strip()):
             raise ValueError(f"{where}: expected one of {', '.join(SOURCE_MOTIONS)} or bvh:<path>, got {value!r}")
     elif key == "modifies":
-        from stimuli.motion.modifier import TABLE_4_1
+        from stimuli.motion.modifier import STRENGTH_ROWS
 
         names = [n.strip() for n in str(value).split("+")]
-        unknown = [n for n in names if n not in TABLE_4_1]
+        unknown = [n for n in names if n not in STRENGTH_ROWS]
         if unknown:
-            raise ValueError(f"{where}: unknown Table 4-1 row(s) {unknown}; expected names joined by '+' from: "
-                             f"{', '.join(TABLE_4_1)}")
+            raise ValueError(f"{where}: unknown Table 4-1/5-2 row(s) {unknown}; expected names joined by '+' "
+                             f"from: {', '.join(STRENGTH_ROWS)}")
 
 
 def _check_strength_levels(factor: "Factor") -> None:
@@ -631,11 +631,11 @@ def _check_screen_mapping(p: Protocol) -> None:
             if bad:
                 raise ValueError(f"factors.{f.name}: sex levels must be F or M, got {bad}")
         if f.maps_to == "parameter" and p.factor_mapped_to("strength") is not None:
-            # The renderer exaggerates, per parameter level, the Table 4-1 rows its setting names.
+            # The renderer exaggerates, per parameter level, the Table 4-1/5-2 rows its setting names.
             bare = [level for level in f.levels if not f.level_settings.get(level, {}).get("modifies")]
             if bare:
                 raise ValueError(f"factors.{f.name}: levels {bare} need level_settings.<level>.modifies: Table "
-                                 "4-1 rows joined by '+' (e.g. \"arm_abduction+arm_bob\")")
+                                 "4-1/5-2 rows joined by '+' (e.g. \"arm_abduction+arm_bob\")")
         if f.maps_to == "gait":
             missing = sorted(set(f.levels + practice) - set(p.gaits))
             if missing:

@@ -52,7 +52,7 @@ def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     for name in ("exp1_shape_motion", "exp2_com_vs_average"):
         clips = list((tmp_path / "quick_clips" / name / "clips").glob("*.mp4"))
         assert len(clips) == 4 and all(c.stat().st_size > 1000 for c in clips)
-    for name in ("exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"):
+    for name in ("exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation"):
         assert (tmp_path / name / "trials.csv").stat().st_size > 0
         assert (tmp_path / name / "survey" / "survey.qsf").is_file()
         assert "<table" in (tmp_path / name / "results" / "report" / "report.html").read_text()

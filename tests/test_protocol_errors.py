@@ -152,7 +152,7 @@ def test_cli_participants_override_must_balance(tmp_path, run_cli):
     assert code == 2 and "--participants" in stderr and not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("name", ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"])
+@pytest.mark.parametrize("name", ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation"])
 def test_bundled_protocols_valid(name, protocol_path, run_cli):
     assert load_protocol(protocol_path(name)).name == name
     code, out, _ = run_cli("validate", protocol_path(name))

@@ -18,7 +18,7 @@ from analysis.responses import import_responses
 from analysis.simulate import draw, simulate_responses, trial_plan
 
 ROOT = Path(__file__).resolve().parents[1]
-PROTOCOLS = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"]
+PROTOCOLS = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation"]
 FORMATS = [("long", ".csv"), ("qualtrics", ".csv"), ("qualtrics-numeric", ".csv"), ("qualtrics-legacy", ".csv"),
            ("jspsych", ".csv"), ("jspsych", ".json")]
 

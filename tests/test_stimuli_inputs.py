@@ -279,7 +279,7 @@ def _protocol_variant(tmp_path: Path, source: Path, old: str, new: str) -> Path:
     (POINTLIGHT, '{view_deg: 90, modifies: "arm_swing"}', '{view_deg: 720, modifies: "arm_swing"}',
      "level_settings.arm_swing.view_deg: expected a view angle"),
     (POINTLIGHT, 'modifies: "hip_twist+torso_twist"}', 'modifies: "hip_twist+torso_twsit"}',
-     "unknown Table 4-1 row(s) ['torso_twsit']"),
+     "unknown Table 4-1/5-2 row(s) ['torso_twsit']"),
     (POINTLIGHT, '"0.5", "12"', '"zero", "12"', "level 'zero' must be a body-fat %"),
     (VALIDATION, "motion: lean_walk", "motion: lean_wlak", "level_settings.lean_mocap.motion: expected one of"),
     (VALIDATION, "motion: lean_walk", 'motion: "bvh:nothere.bvh"', "nothere.bvh not found"),

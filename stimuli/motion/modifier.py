@@ -8,9 +8,11 @@ laterally — the thesis's Softimage script offsets each heel by it), an arm-bob
 arm-swing ratio (arm curves scaled about their mean: v′ = (v − mean)·ratio + mean), plus the
 height scale H / 1.758.
 
-The point-light survey's strengths (Table 4-1, ch. 4) are below it: ``table_strengths`` looks up
-named rows at a body-fat %, ``modify_strengths`` applies them with the same operations plus hip
-twist, torso twist and spinal erectness, which the five-parameter modifier does not model.
+The perceptual surveys' strengths are below it: Table 4-1 (point-light survey, ch. 4) and the rows
+Table 5-2 (character mesh survey, ch. 5) adds, together ``STRENGTH_ROWS``. ``table_strengths`` looks
+up named rows at a body-fat %, ``modify_strengths`` applies them with the same operations plus hip
+twist, torso twist, torso swagger and spinal erectness, which the five-parameter modifier does not
+model.
 
 Examples
 --------
@@ -155,21 +157,52 @@ TABLE_4_1 = {
 }
 
 
+# -- Table 5-2: the character mesh survey's strengths ----------------------------------------------
+# The mesh survey (thesis ch. 5) kept Table 4-1's columns and reused its rows where the values
+# carried over (arm_abduction, arm_bob, speed_cadence, walking_base, hip_twist, torso_twist: same
+# names above); these are the rows it changed or added, as printed in Table 5-2.
+_DECREASING = (1.25, 1.0, 0.75, 0.5, 0.25, 0.0)
+TABLE_5_2 = {
+    "hip_twist_decreased": ("swing", _DECREASING),        # Hips local.roty
+    "torso_twist_decreased": ("swing", _DECREASING),      # Chest local.rotx
+    "arm_swing_decreased": ("swing", _DECREASING),        # Upper Arm (printed local.roty and local.rotz)
+    "torso_swagger": ("swing", (0.8, 1.0, 1.2, 1.4, 1.6, 1.8)),   # Chest local.roty: lateral bend (_sway_torso)
+    # Survey 5 (arm bob alone), kept as printed: 1 (unchanged) stands under 23.5 %, not 12 %. The
+    # text ("35% set at an expanded magnification of 3.7 and 0.5% dipping into the negative
+    # direction of -0.8") names the row's two ends; no column shift puts 3.7 at 35 % and -0.8 at
+    # 0.5 %, and the text's body fats disagree with Table 5-2's columns for walking base (4 "at
+    # 35%", printed at 58 %) and hip twist (0.25 "at 35%", printed at 46.5 %) as well.
+    "arm_bob_isolated": ("swing", (-0.79136, 0.104319, 1.0, 1.895681, 2.791363, 3.687044)),
+    "arm_bob_whole_body": ("swing", (0.55, 1.0, 1.45, 1.895681, 2.34, 2.79)),   # survey 9 (whole body) only
+}
+STRENGTH_ROWS = {**TABLE_4_1, **TABLE_5_2}   # every row a protocol's ``modifies`` may name
+# Rows acting on the same curve; given together, their factors multiply (scalings about one mean compose).
+_SAME_CURVE = {
+    "hip_twist": ("hip_twist", "hip_twist_decreased"),
+    "torso_twist": ("torso_twist", "torso_twist_decreased"),
+    "arm_bob": ("arm_bob", "arm_bob_isolated", "arm_bob_whole_body"),
+    "arm_swing": ("arm_swing", "arm_swing_mild", "arm_swing_decreased"),
+}
+
+
 def table_strengths(parameters: str, body_fat_pct: float) -> dict[str, float]:
-    """Table 4-1's values of the ``+``-joined rows at a body-fat %, linear between its columns.
+    """The values of the ``+``-joined rows of ``STRENGTH_ROWS`` at a body-fat %, linear between
+    the columns (Tables 4-1 and 5-2 share them: ``STRENGTH_BODY_FAT``).
 
     >>> table_strengths("arm_abduction+arm_bob", 35)
     {'arm_abduction': 6.3871, 'arm_bob': 1.895681}
+    >>> table_strengths("torso_swagger+arm_swing_decreased", 58)
+    {'torso_swagger': 1.8, 'arm_swing_decreased': 0.0}
     """
     names = [n.strip() for n in str(parameters).split("+") if n.strip()]
-    unknown = [n for n in names if n not in TABLE_4_1]
+    unknown = [n for n in names if n not in STRENGTH_ROWS]
     if not names or unknown:
-        raise StimuliError(f"modifier: unknown Table 4-1 parameter(s) {unknown or [parameters]}; "
-                           f"expected names joined by '+' from: {', '.join(TABLE_4_1)}")
+        raise StimuliError(f"modifier: unknown Table 4-1/5-2 parameter(s) {unknown or [parameters]}; "
+                           f"expected names joined by '+' from: {', '.join(STRENGTH_ROWS)}")
     lo, hi = STRENGTH_BODY_FAT[0], STRENGTH_BODY_FAT[-1]
     if not lo <= float(body_fat_pct) <= hi:
-        raise StimuliError(f"modifier: body fat {body_fat_pct} % is outside Table 4-1's strengths ({lo}–{hi} %)")
-    return {n: float(np.interp(float(body_fat_pct), STRENGTH_BODY_FAT, TABLE_4_1[n][1])) for n in names}
+        raise StimuliError(f"modifier: body fat {body_fat_pct} % is outside the tables' strengths ({lo}–{hi} %)")
+    return {n: float(np.interp(float(body_fat_pct), STRENGTH_BODY_FAT, STRENGTH_ROWS[n][1])) for n in names}
 
 
 def _yaw(grot: np.ndarray) -> np.ndarray:
@@ -202,6 +235,29 @@ def _twist_torso(m: Motion, rot: np.ndarray, roles: dict, k: float) -> None:
     _turn_world(m, rot, roles["chest"], _about_y((rel - rel.mean()) * (k - 1.0)))
 
 
+def _lateral_bend(q: np.ndarray) -> np.ndarray:
+    """Sideways tilt (rad, towards +x, the character's left) of the +y axis of rotations ``q``."""
+    up = quat.rotate(q, np.array([0.0, 1.0, 0.0]))
+    return np.arctan2(up[..., 0], up[..., 1])
+
+
+def _sway_torso(m: Motion, rot: np.ndarray, roles: dict, k: float) -> None:
+    """Scale the chest bone's lateral bend relative to its parent about its mean: torso swagger,
+    Table 5-2's "Chest local.roty" ("its magnitude in the lateral y axis", §5.1; "thorax lateral
+    rotation", §5.3.3). On the thesis's rig the chest's local.rotx is its twist (Table 4-1) and a
+    spine bone's local.rotz its flexion-extension (spinal erectness, §4.4.2), so local.roty is the
+    remaining axis: a rotation about the forward axis, the chest rolling from side to side in the
+    frontal plane. It turns the chest about its parent's forward axis, which shifts the bend
+    exactly: bend′ = (bend − mean)·k + mean."""
+    grot = m.global_transforms(rot, m.root_translation)[0]
+    chest = roles["chest"]
+    parent = grot[:, m.parents[chest]]
+    bend = _lateral_bend(quat.mul(quat.inv(parent), grot[:, chest]))
+    forward = quat.rotate(parent, np.array([0.0, 0.0, 1.0]))
+    # A turn about +forward by −Δ tilts +y towards +x by Δ.
+    _turn_world(m, rot, chest, forward * (-(bend - bend.mean()) * (k - 1.0))[:, None])
+
+
 def _twist_hips(m: Motion, rot: np.ndarray, roles: dict, k: float) -> np.ndarray:
     """Scale the pelvis heading about its mean (Hips local.roty); the legs are re-solved by IK so
     the feet stay where they were, as on the thesis rig, whose legs were IK chains."""
@@ -221,23 +277,35 @@ def _erect_spine(m: Motion, rot: np.ndarray, roles: dict, deg: float) -> None:
     _turn_world(m, rot, roles["spine"], np.stack([angle, 0 * angle, 0 * angle], -1))
 
 
+def _curve_factor(strengths: dict[str, float], curve: str, default: float | None = None) -> float | None:
+    """The product of the given rows acting on ``curve`` (``_SAME_CURVE``); ``default`` if none is."""
+    given = [strengths[n] for n in _SAME_CURVE[curve] if n in strengths]
+    return float(np.prod(given)) if given else default
+
+
 def modify_strengths(motion: Motion, strengths: dict[str, float]) -> Motion:
-    """Apply Table 4-1 rows (``table_strengths``) to a walk with the modifier's own operations:
-    arm curves scaled about their mean or shifted, heels moved outwards, the whole walk retimed;
-    hip and torso twist and spinal erectness extend the five-parameter modifier."""
-    unknown = sorted(set(strengths) - set(TABLE_4_1))
+    """Apply ``STRENGTH_ROWS`` rows (``table_strengths``) to a walk with the modifier's own
+    operations: arm curves scaled about their mean or shifted, heels moved outwards, the whole walk
+    retimed; hip and torso twist, torso swagger and spinal erectness extend the five-parameter
+    modifier."""
+    unknown = sorted(set(strengths) - set(STRENGTH_ROWS))
     if unknown:
-        raise StimuliError(f"modifier: unknown Table 4-1 parameter(s) {unknown}")
+        raise StimuliError(f"modifier: unknown Table 4-1/5-2 parameter(s) {unknown}; expected: "
+                           f"{', '.join(STRENGTH_ROWS)}")
     roles = role_indices(motion)
     m, rot = motion, motion.rotations.copy()
     if "spinal_erectness" in strengths:
         _erect_spine(m, rot, roles, strengths["spinal_erectness"])
-    if "torso_twist" in strengths:
-        _twist_torso(m, rot, roles, strengths["torso_twist"])
-    if "hip_twist" in strengths:
-        rot = _twist_hips(m, rot, roles, strengths["hip_twist"])
-    bob = strengths.get("arm_bob", 1.0)
-    swing = strengths.get("arm_swing", strengths.get("arm_swing_mild", 1.0))
+    torso = _curve_factor(strengths, "torso_twist")
+    if torso is not None:
+        _twist_torso(m, rot, roles, torso)
+    if "torso_swagger" in strengths:
+        _sway_torso(m, rot, roles, strengths["torso_swagger"])
+    hips = _curve_factor(strengths, "hip_twist")
+    if hips is not None:
+        rot = _twist_hips(m, rot, roles, hips)
+    bob = _curve_factor(strengths, "arm_bob", 1.0)
+    swing = _curve_factor(strengths, "arm_swing", 1.0)
     offset = np.radians(strengths.get("arm_abduction", 0.0))
     rest = m.rest_positions()
     for s, sign in (("l", 1.0), ("r", -1.0)):

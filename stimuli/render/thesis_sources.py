@@ -1,13 +1,14 @@
-"""The thesis protocols' motions (Shewhorak 2017): point-light strengths and validation walks A–D.
+"""The thesis protocols' motions (Shewhorak 2017): survey strengths and validation walks A–D.
 
 Both start from the **lean base walk**: the real CMU capture ``stimuli/data/cmu_35_01_walk.bvh``
 (its one whole cycle, looped on a treadmill), retargeted onto the shown body. The thesis reused its lean
 motion capture (MP) as the base; a real capture keeps the natural variation the modifier is meant
 to act on, whereas the generator's walk already carries anthropometric trends and a drawn style.
 
-- ``strength`` (thesis_pointlight): the base walk on MP's body, modified by Table 4-1 at the
+- ``strength`` (thesis_pointlight, thesis_mesh): the base walk on the shown body (MP's for the
+  point lights, MP's obese deformation for the meshes), modified by Table 4-1 or 5-2 at the
   STRENGTH level's body-fat %, restricted to the rows named by the PARAMETER level's
-  ``level_settings.modifies`` (e.g. ``"arm_abduction+arm_bob"``; ``stimuli.motion.modifier``).
+  ``level_settings.modifies`` (e.g. ``"arm_abduction+arm_bob"``; ``stimuli.motion.modifier.STRENGTH_ROWS``).
 - ``source`` (thesis_validation): each SOURCE level's ``level_settings.motion`` says what drives
   the body: ``lean_walk`` (the base walk), ``modifier`` (the base walk through the five-parameter
   modifier with the body actor's height, body fat, chest and waist/hip), ``generator`` (the motion
@@ -60,11 +61,11 @@ def _setting(factor, level: str, key: str):
     return factor.level_settings.get(level, {}).get(key)
 
 
-# -- thesis_pointlight: STRENGTH × PARAMETER -------------------------------------------------------
+# -- thesis_pointlight, thesis_mesh: STRENGTH × PARAMETER ----------------------------------------
 
 def strength_motion(protocol, stimulus, strength: str, body, look: Look):
-    """The base walk on ``body`` modified by Table 4-1 at body fat ``strength`` (%), restricted to
-    the rows the stimulus's PARAMETER level names in ``level_settings.modifies``."""
+    """The base walk on ``body`` modified by Tables 4-1/5-2 at body fat ``strength`` (%), restricted
+    to the rows the stimulus's PARAMETER level names in ``level_settings.modifies``."""
     from stimuli.motion.modifier import modify_strengths, table_strengths
 
     factor = protocol.factor_mapped_to("parameter")
@@ -72,7 +73,7 @@ def strength_motion(protocol, stimulus, strength: str, body, look: Look):
     modifies = _setting(factor, level, "modifies") if level is not None else None
     if not modifies:
         where = f"factors.{factor.name}.level_settings.{level}" if level is not None else "a factor with maps_to: parameter"
-        raise StimuliError(f"{protocol.name}: {where} needs 'modifies': Table 4-1 rows joined by '+' "
+        raise StimuliError(f"{protocol.name}: {where} needs 'modifies': Table 4-1/5-2 rows joined by '+' "
                            "(e.g. \"arm_abduction+arm_bob\"), the gait parameters this level exaggerates")
     try:
         body_fat = float(strength)
