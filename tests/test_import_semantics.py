@@ -469,3 +469,23 @@ def test_qualtrics_columns_of_colliding_ids_go_to_their_own_stimuli(tmp_path):
     message = str(err.value)
     assert "clash.csv" in message and "column 'WALK-LO1-NOCOM-COM'" in message
     assert f"'{new}'" in message and "'walk-Lo1-NoCOM_COM'" in message
+
+
+def test_ranking_answers_get_their_trial_number_in_every_format(tmp_path):
+    """A ranking question's Qualtrics columns are <tag>_1 … <tag>_k while the block's _DO list names <tag>:
+    every ranking answer imported with an empty trial number from Qualtrics, numbered from jsPsych."""
+    text = (ROOT / "protocols" / "thesis_validation.yaml").read_text()
+    for old, new in (("arrangements: fixed ", "arrangements: latin_square "), ("counterbalance: between", "counterbalance: within")):
+        assert old in text
+        text = text.replace(old, new)
+    protocol = tmp_path / "p.yaml"
+    protocol.write_text(text)
+    design = _make_design(tmp_path, protocol, 4)
+    sim = _simulated(design, participants=4, seed=5)
+    trials = {}
+    for fmt in ("long", "qualtrics", "qualtrics-numeric", "jspsych"):
+        (tmp_path / f"{fmt}.csv").write_text(export_text(sim, design, fmt, seed=5), encoding="utf-8")
+        data = import_responses(tmp_path / f"{fmt}.csv", design).data.sort_values(["participant", "stimulus_id"])
+        trials[fmt] = data["trial"].astype("Int64").tolist()
+    assert len(trials["jspsych"]) == 16 and sorted(set(trials["jspsych"])) == [1, 2, 3, 4]
+    assert all(t == trials["jspsych"] for t in trials.values()), trials

@@ -135,7 +135,10 @@ def _row_answers(raw, record, row, pid, cols: QualtricsColumns, groups, reading:
         value = record[i].strip()
         if not value:
             continue
-        trial = order.get(raw.columns[i].lower()) or order.get(str(raw.import_ids[i].get("ImportId", "")).lower())
+        names = (raw.columns[i], str(raw.import_ids[i].get("ImportId", "")))
+        if pos is not None:   # a rank-order column (<tag>_<k>, QID_<k>): the _DO list names the question
+            names = tuple(name.rsplit("_", 1)[0] for name in names)
+        trial = order.get(names[0].lower()) or order.get(names[1].lower())
         if pos is None:
             answers[(raw.columns[i], None)] = Answer(row, pid, sid, value, raw.columns[i], rep, trial, groups=groups,
                                                      reading=reading)
