@@ -15,8 +15,19 @@ Counterbalancing rules (all seeded, so the same protocol + seed gives the same l
   within each between group, the rotation going on from one group to the next so that a group size
   the orders do not divide still gives totals as even as possible (``Design.notes`` then says so);
   ``random`` shuffles per participant; ``fixed`` keeps the declared order;
+- nested blocks (``blocks.nested``): the first ``blocks.by`` factor makes main blocks, the others
+  sub-blocks shown one after the other inside each main block. ``counterbalanced`` crosses the
+  Williams rows over the main blocks with those over the sub-blocks (one sub-block order per
+  participant, the same inside each of their main blocks) and deals the combinations as above, listed
+  so that a group size they do not divide still keeps each level's orders nearly even
+  (:func:`nested_orders`); ``random`` shuffles the main blocks and, separately inside each,
+  the sub-blocks; ``fixed`` keeps the declared order. Labels and block numbers stay those of the
+  sub-blocks (``SEX=F|GAIT=walk``, 1…), so trials.csv reads as for flat blocks;
 - practice: ``practice.per_block`` clips drawn from the block's practice pool, whole shuffled copies of
-  the pool first when it asks for more (copies numbered repetition 2, 3, …);
+  the pool first when it asks for more (copies numbered repetition 2, 3, …), before every block (with
+  nested blocks: every sub-block);
+- familiarisation: the block's bodies before each block; with nested blocks, the main block's bodies
+  once, before its first sub-block (:func:`familiarization_scopes`);
 - side-by-side/row placement of an ``alternatives`` factor: ``within`` shows every arrangement to
   everyone; ``between`` rotates arrangements over participants so every position is balanced over
   every k participants (:func:`arrangement_index`); with three or more levels the arrangements are
@@ -35,6 +46,7 @@ import itertools
 import json
 from collections import Counter
 from dataclasses import asdict, dataclass, field
+from math import gcd
 
 import numpy as np
 
@@ -266,6 +278,70 @@ def block_label(cell: dict[str, str]) -> str:
     return "|".join(f"{k}={v}" for k, v in cell.items()) or "all"
 
 
+def main_blocks(protocol: Protocol) -> list[tuple[dict[str, str], list[int]]]:
+    """With ``blocks.nested``: each main block (a level of the first ``blocks.by`` factor) and the
+    indices in :func:`block_cells` of its sub-blocks, in declared order; ``[]`` for flat blocks.
+
+    >>> from stimuli.protocol import load_protocol
+    >>> main_blocks(load_protocol("protocols/exp2_com_vs_average.yaml"))
+    [({'SEX': 'F'}, [0, 1]), ({'SEX': 'M'}, [2, 3])]
+    """
+    if not protocol.blocks.nested:
+        return []
+    main = protocol.blocks.by[0]
+    levels = protocol.factor(main).levels
+    per_main = len(block_cells(protocol)) // len(levels)   # block_cells varies the first factor slowest
+    return [({main: level}, list(range(m * per_main, (m + 1) * per_main))) for m, level in enumerate(levels)]
+
+
+def nested_orders(n_main: int, n_sub: int) -> list[list[int]]:
+    """Counterbalanced nested block orders, as indices into :func:`block_cells`: every Williams row
+    over the main blocks crossed with every Williams row over the sub-blocks (one sub-order for all
+    the main blocks of a participant), a main block's sub-blocks consecutive.
+
+    Crossing ``c`` takes main row ``c mod a`` and sub row ``(c + c div lcm(a, b)) mod b`` (a bijection):
+    every ``a`` consecutive crossings hold each main row once, and inside each run of ``lcm(a, b)``
+    every ``b`` consecutive ones each sub row once. Dealt in turn (:func:`_balanced_labels`), a group
+    size the crossings do not divide thus keeps each level nearly even on its own: 10 participants
+    over Exp. 2's 4 crossings see SEX first 5 / 5 and walk first 5 / 5 (listed main row first, it
+    would be 6 / 4).
+
+    >>> nested_orders(2, 2)
+    [[0, 1, 2, 3], [3, 2, 1, 0], [1, 0, 3, 2], [2, 3, 0, 1]]
+    """
+    mains, subs = williams_orders(n_main), williams_orders(n_sub)
+    a, b = len(mains), len(subs)
+    period = a * b // gcd(a, b)
+    out = []
+    for c in range(a * b):
+        turn, step = divmod(c, period)
+        out.append(_nest(mains[step % a], subs[(step + turn) % b], n_sub))
+    return out
+
+
+def _nest(main_order: list[int], sub_order: list[int], n_sub: int) -> list[int]:
+    """Block indices of main blocks in ``main_order``, each with its sub-blocks in ``sub_order``."""
+    return [m * n_sub + s for m in main_order for s in sub_order]
+
+
+def familiarization_scopes(protocol: Protocol, order: list[dict[str, str]]) -> list[dict[str, str] | None]:
+    """For each block of a participant's ``order`` (block cells), the levels its familiarisation clips
+    must match, or None when it shows none: each block's own cell for flat blocks; with nested blocks
+    the main block's level on the first of its sub-blocks, None on the others.
+
+    >>> from stimuli.protocol import load_protocol
+    >>> p = load_protocol("protocols/exp2_com_vs_average.yaml")
+    >>> familiarization_scopes(p, [{"SEX": "M", "GAIT": "jog"}, {"SEX": "M", "GAIT": "walk"},
+    ...                            {"SEX": "F", "GAIT": "jog"}, {"SEX": "F", "GAIT": "walk"}])
+    [{'SEX': 'M'}, None, {'SEX': 'F'}, None]
+    """
+    if not protocol.blocks.nested:
+        return list(order)
+    main = protocol.blocks.by[0]
+    previous = [None] + [cell[main] for cell in order[:-1]]
+    return [{main: cell[main]} if cell[main] != before else None for cell, before in zip(order, previous)]
+
+
 def shuffle_no_repeats(items: list[str], rng: np.random.Generator) -> list[str]:
     """A random order of ``items`` with no element twice in a row, when such an order exists.
 
@@ -322,7 +398,7 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     rng = np.random.default_rng(seed)
     tests, practices, familiar = test_stimuli(protocol), practice_stimuli(protocol), familiarization_stimuli(protocol)
     blocks = block_cells(protocol)
-    orders = williams_orders(len(blocks)) if protocol.blocks.order in ("counterbalanced", "latin_square") else None
+    orders = _counterbalanced_orders(protocol, len(blocks))
 
     group_of = _balanced_labels(n, len(group_cells), rng)
     trials: list[Trial] = []
@@ -334,7 +410,7 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
         dealt += len(members)
         for rank, p in enumerate(members):
             if protocol.blocks.order == "random":
-                order = [int(i) for i in rng.permutation(len(blocks))]
+                order = _random_order(protocol, len(blocks), rng)
             else:
                 order = orders[order_of[rank]] if orders else list(range(len(blocks)))
             block_orders[p + 1] = [block_label(blocks[i]) for i in order]
@@ -347,6 +423,23 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
              + back_to_back_notes(trials))
     return Design(protocol, n, seed, tests + practices + familiar, trials,
                   [block_label(b) for b in blocks], block_orders, notes)
+
+
+def _counterbalanced_orders(protocol: Protocol, n_blocks: int) -> list[list[int]] | None:
+    """The block orders dealt to participants (indices into :func:`block_cells`), None unless counterbalanced."""
+    if protocol.blocks.order not in ("counterbalanced", "latin_square"):
+        return None
+    mains = main_blocks(protocol)
+    return nested_orders(len(mains), n_blocks // len(mains)) if mains else williams_orders(n_blocks)
+
+
+def _random_order(protocol: Protocol, n_blocks: int, rng: np.random.Generator) -> list[int]:
+    """A participant's random block order; nested: the main blocks shuffled, then the sub-blocks of each."""
+    mains = main_blocks(protocol)
+    if not mains:
+        return [int(i) for i in rng.permutation(n_blocks)]
+    n_sub = n_blocks // len(mains)
+    return [int(m) * n_sub + int(s) for m in rng.permutation(len(mains)) for s in rng.permutation(n_sub)]
 
 
 def back_to_back_notes(trials: list[Trial]) -> list[str]:
@@ -398,9 +491,9 @@ def _participant_trials(protocol, participant, rank, groups, blocks, tests, prac
         number += 1
         trials.append(Trial(participant, groups, position, block_label(cell), number, stimulus_id, repetition, kind))
 
-    for position, cell in enumerate(blocks, start=1):
+    for position, (cell, fam_scope) in enumerate(zip(blocks, familiarization_scopes(protocol, blocks)), start=1):
         scope = groups | cell
-        fam = [s for s in familiar if _matches(s, scope)]
+        fam = [s for s in familiar if fam_scope is not None and _matches(s, groups | fam_scope)]
         for s in _familiarization_order(protocol, fam):
             add(s.stimulus_id, position, 1, "familiarization")
         pool = [s.stimulus_id for s in practices if _matches(s, scope)]
@@ -512,9 +605,22 @@ def design_json(design: Design) -> dict:
         "repetitions": p.repetitions,
         "blocks": design.blocks,
         "block_orders": {str(k): v for k, v in design.block_orders.items()},
+    } | _nesting_json(design) | {
         "stimuli": [asdict(s) | {"arrangement": list(s.arrangement), "practice": s.practice} for s in design.stimuli],
         "protocol": p.to_json_dict(),
     }
+
+
+def _nesting_json(design: Design) -> dict:
+    """``block_nesting`` for nested blocks (main and sub factors, each main block's sub-block labels);
+    nothing for flat blocks, whose design.json stays as it was before the option."""
+    p = design.protocol
+    mains = main_blocks(p)
+    if not mains:
+        return {}
+    labels = design.blocks
+    return {"block_nesting": {"main": p.blocks.by[:1], "sub": p.blocks.by[1:],
+                              "main_blocks": {block_label(cell): [labels[i] for i in subs] for cell, subs in mains}}}
 
 
 def write_design(design: Design, out_dir) -> list:

@@ -270,11 +270,16 @@ class Blocks(Strict):
     everyone. ``trials`` — ``random``: the block's test trials shuffled per participant, never the
     same clip twice in a row; ``fixed``: the declared order of the factor levels for everyone (the
     first-declared factor varying slowest), the whole sequence once per repetition.
+    ``nested`` — ``false`` (the default): every combination of the ``by`` levels is one block, the
+    blocks ordered as a whole; ``true``: the first ``by`` factor makes main blocks and the others
+    sub-blocks inside each, a main block's sub-blocks shown one after the other (``order`` applies
+    at both levels; familiarisation comes once before each main block: see :mod:`stimuli.design`).
     """
 
     by: list[str] = []
     order: Literal["counterbalanced", "latin_square", "random", "fixed"] = "counterbalanced"
     trials: Literal["random", "fixed"] = "random"
+    nested: bool = Field(default=False, strict=True)   # strict: 1 or a quoted "true" is refused
 
 
 class Practice(Strict):
@@ -378,6 +383,8 @@ class Protocol(Strict):
         data = json.loads(self.model_dump_json())
         if self.blocks.trials == "random":   # the default: left out, so that designs written before
             del data["blocks"]["trials"]     # blocks.trials existed stay byte-identical
+        if not self.blocks.nested:           # likewise for blocks.nested
+            del data["blocks"]["nested"]
         return data
 
 
@@ -406,6 +413,10 @@ def check_consistency(p: Protocol) -> None:
             raise ValueError(f"blocks.by: unknown factor {name!r} (factors: {names})")
         if p.factor(name).role != "within":
             raise ValueError(f"blocks.by: {name} is a {p.factor(name).role} factor; blocks must be within factors")
+    if p.blocks.nested and len(p.blocks.by) < 2:
+        raise ValueError(f"blocks.nested: nested: true needs at least two factors in blocks.by (the first makes "
+                         f"the main blocks, the others the sub-blocks inside each), got blocks.by: "
+                         f"[{', '.join(p.blocks.by)}]; add a factor to blocks.by or remove nested")
     _check_trial_order(p)
     _check_alternatives_motion(p)
     _check_measure(p)

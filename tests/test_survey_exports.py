@@ -79,11 +79,13 @@ def test_psychopy_conditions_per_block_and_trials(tmp_path):
         tests = list(csv.DictReader(open(tmp_path / "pp" / b["test_file"])))
         assert len(tests) == 8 and b["nReps"] == "2"
         assert {(t["left"], t["right"]) for t in tests} == {("NoCOM", "COM"), ("COM", "NoCOM")}
-        fam = [r["stimulus_id"] for r in csv.DictReader(open(tmp_path / "pp" / b["familiarization_file"]))]
-        assert len(fam) == 4 and b["practice_per_block"] == "4"
+        assert b["familiarization_file"] == "" and b["practice_per_block"] == "4"   # nested: per SEX block
         assert (tmp_path / "pp" / tests[0]["movie"]).resolve() == (folder / "clips" / f"{tests[0]['stimulus_id']}.mp4").resolve()
+    for main in csv.DictReader(open(tmp_path / "pp" / "main_blocks.csv")):
+        fam = [r["stimulus_id"] for r in csv.DictReader(open(tmp_path / "pp" / main["familiarization_file"]))]
+        assert len(fam) == 4 and all(sid.startswith(f"fam-{main['main_block'][-1]}_") for sid in fam)
     trials = list(csv.DictReader(open(tmp_path / "pp" / "trials.csv")))
-    assert len(trials) == 16 * 96 and trials[0]["movie"].endswith(trials[0]["stimulus_id"] + ".mp4")
+    assert len(trials) == 16 * 88 and trials[0]["movie"].endswith(trials[0]["stimulus_id"] + ".mp4")
 
 
 # -- jsPsych folder (the browser run is in test_survey_browser.py) ---------------------------------
@@ -254,7 +256,8 @@ def test_export_all_writes_every_format_for_render_and_demo(tmp_path):
     assert {p.name for p in survey.iterdir()} == {"survey.qsf", "survey_qualtrics.txt", "jspsych", "psychopy",
                                                   "qualtrics_manual_steps.txt"}
     steps = (survey / "qualtrics_manual_steps.txt").read_text()
-    assert steps.startswith("After importing survey_qualtrics.txt") and "Randomizer presenting all 4 Groups" in steps
+    assert steps.startswith("After importing survey_qualtrics.txt")
+    assert "Randomizer presenting all 2 main-block Groups" in steps   # Exp. 2's nested SEX > GAIT blocks
     again = export_all(folder, video_base_url="https://x.org")      # a second run keeps the jsPsych folder
     assert "left as it is" in again[2].notes[0]
 

@@ -163,7 +163,7 @@ def test_exp2_familiarisation_in_bmi_order_and_side_tags(qsfs, folders):
     by_tag = {q["DataExportTag"]: q for q in questions(qsf)}
     by_qid = {q["QuestionID"]: q for q in questions(qsf)}
     fam_blocks = [b for b in blocks(qsf).values() if b["Description"].endswith("familiarization")]
-    assert len(fam_blocks) == 4
+    assert len(fam_blocks) == 2      # nested blocks: once per SEX block
     source = load_source(folders["exp2_com_vs_average"])
     bmi = {a.id: a.bmi for a in source.protocol.actors}
     for block in fam_blocks:
@@ -173,10 +173,11 @@ def test_exp2_familiarisation_in_bmi_order_and_side_tags(qsfs, folders):
         assert len(bmis) == 4 and bmis == sorted(bmis)
     assert [c["Display"] for c in by_tag["walk-F-Hi1-COM_NoCOM_r2"]["Choices"].values()] == ["Left", "Right"]
     assert len([t for t in by_tag if t.endswith(("_r1", "_r2")) and not t.startswith("practice")]) == 64
-    # no between factor: no group randomizer, but the 4 SEX x GAIT blocks are randomised, evenly
+    # no between factor: no group randomizer, but the 2 SEX blocks are randomised, evenly, and inside each
+    # its 2 GAIT sub-blocks (nested blocks; tests/test_nested_blocks.py checks the tree)
     root = elements(qsf, "FL")[0]["Payload"]
     randomizers = [n for n in flow_nodes(root) if n["Type"] == "BlockRandomizer"]
-    assert [(r["SubSet"], r["EvenPresentation"]) for r in randomizers] == [(4, True)]
+    assert [(r["SubSet"], r["EvenPresentation"]) for r in randomizers] == [(2, True)] * 3
 
 
 def test_video_urls_use_the_base_url_and_the_clip_files(qsfs, folders):

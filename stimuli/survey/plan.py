@@ -11,7 +11,10 @@ time. This module states what they randomise over, with the same rules as :mod:`
 - each rotation holds the protocol's **blocks** in declared order, each with its familiarisation
   clips (in the design's order), its practice pool (and how many to draw) and its test questions
   (every test stimulus × repetition, repetition by repetition in declared order: the design's own
-  order when ``blocks.trials`` is ``fixed``, which the exports then keep).
+  order when ``blocks.trials`` is ``fixed``, which the exports then keep);
+- with ``blocks.nested``, the rotation's blocks are sub-blocks and its **main blocks** group them
+  (declared order): each main block holds the familiarisation clips, shown once before its
+  sub-blocks, whose own familiarisation is then empty.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass, field
 
-from stimuli.design import arrangement_index, arrangements, block_cells, block_label
+from stimuli.design import arrangement_index, arrangements, block_cells, block_label, main_blocks
 from stimuli.survey.source import StimulusInfo, SurveySource
 
 
@@ -34,9 +37,20 @@ class BlockPlan:
 
 
 @dataclass
+class MainBlockPlan:
+    """With ``blocks.nested``: a main block (e.g. ``SEX=F``), its familiarisation and its sub-blocks."""
+
+    label: str                                  # "SEX=F"
+    cell: dict[str, str]
+    familiarization: list[StimulusInfo]         # shown once, before the first of its sub-blocks
+    blocks: list[BlockPlan]                     # its sub-blocks in declared order
+
+
+@dataclass
 class RotationPlan:
     index: int | None                           # None when there is no between-participant rotation
-    blocks: list[BlockPlan]
+    blocks: list[BlockPlan]                     # every block (with nesting: every sub-block), declared order
+    main_blocks: list[MainBlockPlan] = field(default_factory=list)   # [] unless blocks.nested
 
 
 @dataclass
@@ -60,8 +74,21 @@ def build_plan(source: SurveySource) -> list[GroupPlan]:
         groups = dict(zip([f.name for f in between], combo))
         plan = GroupPlan(groups)
         for r in rotations:
-            plan.rotations.append(RotationPlan(r, [_block(source, groups, cell, r) for cell in block_cells(p)]))
+            blocks = [_block(source, groups, cell, r) for cell in block_cells(p)]
+            plan.rotations.append(RotationPlan(r, blocks, _main_blocks(source, groups, blocks)))
         out.append(plan)
+    return out
+
+
+def _main_blocks(source: SurveySource, groups: dict, blocks: list[BlockPlan]) -> list[MainBlockPlan]:
+    """The main blocks of a nested protocol: the familiarisation moves from the sub-blocks to them."""
+    out = []
+    for cell, subs in main_blocks(source.protocol):
+        fam = _familiarization_order(source, [s for s in source.of_kind("familiarization")
+                                              if _matches(s, groups | cell)])
+        for i in subs:
+            blocks[i].familiarization = []
+        out.append(MainBlockPlan(block_label(cell), cell, fam, [blocks[i] for i in subs]))
     return out
 
 

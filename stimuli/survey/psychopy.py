@@ -15,6 +15,20 @@ Written into one folder::
                                      script that replays the design exactly (loop over rows where
                                      ``participant`` is the session's participant)
 
+With ``blocks.nested`` (e.g. SEX blocks holding GAIT sub-blocks) also::
+
+    main_blocks.csv                  outer loop: one row per main block (declared order) with its
+                                     ``familiarization_file`` (shown once, before its sub-blocks) and
+                                     ``blocks_file``
+    conditions/<main>_blocks.csv     inner loop (conditionsFile ``$blocks_file``): the main block's
+                                     sub-blocks, rows as in blocks.csv
+    conditions/<main>_familiarization.csv   the main block's familiarisation clips, in order
+
+and blocks.csv (all sub-blocks) gains ``main_block``, its ``familiarization_file`` left empty. In
+Builder: loop over main_blocks.csv → familiarisation loop → loop over ``$blocks_file`` → practice
+and test loops; set both block loops random (``order: random``/``counterbalanced``) or sequential
+(``fixed``), as for flat blocks.
+
 Each conditions row has ``stimulus_id``, ``movie`` (path relative to the folder, as PsychoPy's
 MovieStim wants), the factor levels, ``left``/``right`` or ``positions``, ``question`` and the answer
 options (``options`` = labels joined by ``|``). With several between groups, the files carry the group in
@@ -50,35 +64,55 @@ def _row(source: SurveySource, s: StimulusInfo, movie_prefix: str) -> dict[str, 
 
 def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, str]:
     """File name (relative to the output folder) → CSV text."""
-    p = source.protocol
     files: dict[str, str] = {}
-    blocks = []
+    blocks, mains = [], []
     for plan in build_plan(source):
         for rotation in plan.rotations:
-            for block in rotation.blocks:
-                parts = list(plan.groups.items()) + ([("rotation", str(rotation.index))]
-                                                      if rotation.index is not None else [])
-                stem = _name("_".join(f"{k}-{v}" for k, v in parts) + ("_" if parts else "") + block.label)
-                entry = dict(plan.groups) | ({"rotation": rotation.index} if rotation.index is not None else {})
-                entry |= {"block_label": block.label, "nReps": p.repetitions,
-                          "test_file": f"conditions/{stem}_test.csv", "practice_file": "",
-                          "practice_per_block": block.practice_count, "familiarization_file": ""}
-                if p.blocks.trials == "fixed":   # the test loop's loopType (only then: other files stay as they were)
-                    entry["test_loop"] = "sequential"
-                tests = [s for s, rep in block.tests if rep == 1]
-                files[entry["test_file"]] = csv_text([_row(source, s, movie_prefix) for s in tests])
-                if block.practice_count:
-                    entry["practice_file"] = f"conditions/{stem}_practice.csv"
-                    files[entry["practice_file"]] = csv_text([_row(source, s, movie_prefix) for s in block.practice])
-                if block.familiarization:
+            parts = list(plan.groups.items()) + ([("rotation", str(rotation.index))]
+                                                  if rotation.index is not None else [])
+            prefix = "_".join(f"{k}-{v}" for k, v in parts) + ("_" if parts else "")
+            where = dict(plan.groups) | ({"rotation": rotation.index} if rotation.index is not None else {})
+            main_of = {b.label: m.label for m in rotation.main_blocks for b in m.blocks}
+            entries = {block.label: _block_entry(source, files, block, _name(prefix + block.label), movie_prefix,
+                                                 where | ({"main_block": main_of[block.label]} if main_of else {}))
+                       for block in rotation.blocks}
+            blocks += entries.values()
+            for main in rotation.main_blocks:
+                stem = _name(prefix + main.label)
+                entry = where | {"main_block": main.label, "familiarization_file": "",
+                                 "blocks_file": f"conditions/{stem}_blocks.csv"}
+                files[entry["blocks_file"]] = csv_text([entries[b.label] for b in main.blocks])
+                if main.familiarization:
                     entry["familiarization_file"] = f"conditions/{stem}_familiarization.csv"
                     files[entry["familiarization_file"]] = csv_text(
-                        [_row(source, s, movie_prefix) for s in block.familiarization])
-                blocks.append(entry)
+                        [_row(source, s, movie_prefix) for s in main.familiarization])
+                mains.append(entry)
+    if mains:
+        files["main_blocks.csv"] = csv_text(mains)
     files["blocks.csv"] = csv_text(blocks)
     files["trials.csv"] = csv_text([t | {"movie": movie_prefix + source.stimulus(t["stimulus_id"]).file}
                                     for t in source.trials])
     return files
+
+
+def _block_entry(source: SurveySource, files: dict[str, str], block, stem: str, movie_prefix: str,
+                 where: dict) -> dict[str, object]:
+    """A block's row of blocks.csv (``where``: its group, rotation, main block); its conditions files go
+    into ``files``."""
+    p = source.protocol
+    entry = where | {"block_label": block.label, "nReps": p.repetitions, "test_file": f"conditions/{stem}_test.csv",
+                     "practice_file": "", "practice_per_block": block.practice_count, "familiarization_file": ""}
+    if p.blocks.trials == "fixed":   # the test loop's loopType (only then: other files stay as they were)
+        entry["test_loop"] = "sequential"
+    tests = [s for s, rep in block.tests if rep == 1]
+    files[entry["test_file"]] = csv_text([_row(source, s, movie_prefix) for s in tests])
+    if block.practice_count:
+        entry["practice_file"] = f"conditions/{stem}_practice.csv"
+        files[entry["practice_file"]] = csv_text([_row(source, s, movie_prefix) for s in block.practice])
+    if block.familiarization:
+        entry["familiarization_file"] = f"conditions/{stem}_familiarization.csv"
+        files[entry["familiarization_file"]] = csv_text([_row(source, s, movie_prefix) for s in block.familiarization])
+    return entry
 
 
 def write_psychopy(source: SurveySource, out_dir: str | Path) -> list[Path]:

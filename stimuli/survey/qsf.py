@@ -12,6 +12,12 @@ familiarisation page(s), practice intro + practice questions, and the test quest
 in random order — or, with ``blocks.trials: fixed``, in the design's fixed order with question
 randomisation off; every stimulus ``repetitions`` times) → end.
 
+With ``blocks.nested`` the blocks are nested: the randomizer (or, with ``order: fixed``, the declared
+sequence) holds one *Group* per main block (e.g. ``SEX=F``), each holding the main block's
+familiarisation page(s) and then a *BlockRandomizer* (``EvenPresentation``; a plain sequence when
+fixed) over *Groups* of its sub-blocks (practice + test, as above), so a main block's sub-blocks are
+always shown together and the familiarisation once before them.
+
 IDs are derived from the protocol name, so the same design gives a byte-identical file.
 """
 
@@ -22,7 +28,7 @@ import json
 import math
 import string
 
-from stimuli.survey.plan import BlockPlan, GroupPlan, build_plan, export_tag
+from stimuli.survey.plan import BlockPlan, GroupPlan, MainBlockPlan, RotationPlan, build_plan, export_tag
 from stimuli.survey.qsf_questions import descriptive, video_question
 from stimuli.survey.source import SurveySource, clip_url
 from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, consent_html, escape, instructions_html,
@@ -152,20 +158,47 @@ def _assignment_flow(b: QsfBuilder, plans: list[GroupPlan]) -> list[dict]:
 
 def _rotation_flow(b: QsfBuilder, plan: GroupPlan) -> list[dict]:
     if len(plan.rotations) == 1:
-        return _blocks_flow(b, plan, plan.rotations[0].blocks, "")
+        return _blocks_flow(b, plan, plan.rotations[0], "")
     branches = []
     for rotation in plan.rotations:
         tag = f" rotation {rotation.index}"
-        inner = [b.embedded({ROTATION_FIELD: str(rotation.index)})] + _blocks_flow(b, plan, rotation.blocks, tag)
+        inner = [b.embedded({ROTATION_FIELD: str(rotation.index)})] + _blocks_flow(b, plan, rotation, tag)
         branches.append(b.group(f"{plan.label}{tag}", inner))
     return [b.randomizer(branches, 1)]
 
 
-def _blocks_flow(b: QsfBuilder, plan: GroupPlan, blocks: list[BlockPlan], tag: str) -> list[dict]:
-    units = [b.group(f"{plan.label} | {block.label}{tag}", _block_flow(b, plan, block, tag)) for block in blocks]
+def _blocks_flow(b: QsfBuilder, plan: GroupPlan, rotation: RotationPlan, tag: str) -> list[dict]:
+    """The rotation's blocks, or with nesting its main blocks, each a Group; randomised unless fixed."""
+    if rotation.main_blocks:
+        units = [b.group(f"{plan.label} | {main.label}{tag}", _main_block_flow(b, plan, main, tag))
+                 for main in rotation.main_blocks]
+    else:
+        units = [b.group(f"{plan.label} | {block.label}{tag}", _block_flow(b, plan, block, tag))
+                 for block in rotation.blocks]
+    return _in_block_order(b, units)
+
+
+def _in_block_order(b: QsfBuilder, units: list[dict]) -> list[dict]:
+    """Groups presented all, in random order (evenly) — or as listed when ``blocks.order`` is fixed."""
     if len(units) > 1 and b.protocol.blocks.order != "fixed":
         return [b.randomizer(units, len(units))]
     return units
+
+
+def _main_block_flow(b: QsfBuilder, plan: GroupPlan, main: MainBlockPlan, tag: str) -> list[dict]:
+    """A main block: its familiarisation page(s) once, then its sub-blocks (each a Group) in block order."""
+    flow = []
+    if main.familiarization:
+        flow.append(_familiarization_ref(b, f"{plan.label} | {main.label}{tag}", main.familiarization))
+    subs = [b.group(f"{plan.label} | {block.label}{tag}", _block_flow(b, plan, block, tag)) for block in main.blocks]
+    return flow + _in_block_order(b, subs)
+
+
+def _familiarization_ref(b: QsfBuilder, name: str, clips: list) -> dict:
+    """The familiarisation block (an intro, then one clip per page) and its place in the flow."""
+    qids = [b.add_text("fam_intro", f"<p>{escape(FAMILIARIZATION_INTRO)}</p>")]
+    qids += [b.add_text(s.stimulus_id, b.clip(s), has_video=True) for s in clips]
+    return b.block_ref(b.add_block(f"{name} familiarization", qids))
 
 
 def _block_flow(b: QsfBuilder, plan: GroupPlan, block: BlockPlan, tag: str) -> list[dict]:
@@ -174,9 +207,7 @@ def _block_flow(b: QsfBuilder, plan: GroupPlan, block: BlockPlan, tag: str) -> l
     repetitions = b.protocol.repetitions
     flow = []
     if block.familiarization:
-        qids = [b.add_text("fam_intro", f"<p>{escape(FAMILIARIZATION_INTRO)}</p>")]
-        qids += [b.add_text(s.stimulus_id, b.clip(s), has_video=True) for s in block.familiarization]
-        flow.append(b.block_ref(b.add_block(f"{name} familiarization", qids)))
+        flow.append(_familiarization_ref(b, name, block.familiarization))
     if block.practice_count:
         copies = math.ceil(block.practice_count / len(block.practice))
         intro = b.add_block(f"{name} practice intro", [b.add_text("practice_intro", f"<p>{escape(PRACTICE_INTRO)}</p>")])

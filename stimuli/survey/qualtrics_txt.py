@@ -9,7 +9,9 @@ to randomise them: that takes a manual step (random test order), while ``blocks.
 needs none — the test questions are written in the design's fixed order (every clip once per
 repetition), and question randomisation must simply stay off.
 
-The blocks are written group by group (and rotation by rotation), as in the QSF file; a ranking is
+The blocks are written group by group (and rotation by rotation), as in the QSF file; with
+``blocks.nested``, main block by main block: its familiarisation block once, then its sub-blocks'
+practice and test blocks (the manual steps say how to nest the randomizers). A ranking is
 written as a matrix (items × rank) because the format has no rank-order question — its export columns
 (``<tag>_1`` … ``<tag>_k`` = rank of the clip at each position) match a rank-order question's.
 """
@@ -18,7 +20,8 @@ from __future__ import annotations
 
 import math
 
-from stimuli.survey.plan import BlockPlan, GroupPlan, build_plan, export_tag
+from stimuli.design import block_label
+from stimuli.survey.plan import BlockPlan, build_plan, export_tag
 from stimuli.survey.qsf import PROTOCOL_FIELD, ROTATION_FIELD
 from stimuli.survey.qsf_questions import NEXT_AFTER_VIEW_JS
 from stimuli.survey.source import SurveySource, clip_url
@@ -73,19 +76,30 @@ def txt_text(source: SurveySource, video_base_url: str | None = None) -> str:
     for plan in build_plan(source):
         for rotation in plan.rotations:
             suffix = f" rotation {rotation.index}" if rotation.index is not None else ""
-            for block in rotation.blocks:
-                _write_block(w, f"{plan.label} | {block.label}{suffix}", block)
+            if not rotation.main_blocks:
+                for block in rotation.blocks:
+                    _write_block(w, f"{plan.label} | {block.label}{suffix}", block)
+            for main in rotation.main_blocks:           # nested: a main block's familiarisation, its sub-blocks
+                _write_familiarization(w, f"{plan.label} | {main.label}{suffix}", main.familiarization)
+                for block in main.blocks:
+                    _write_block(w, f"{plan.label} | {block.label}{suffix}", block)
     return "\n".join(w.lines).rstrip("\n") + "\n"
+
+
+def _write_familiarization(w: TxtWriter, name: str, clips: list) -> None:
+    """A familiarisation block: the intro, then one clip per page (nothing when there are no clips)."""
+    if not clips:
+        return
+    w.block(f"{name} familiarization")
+    w.text("fam_intro", f"<p>{escape(FAMILIARIZATION_INTRO)}</p>")
+    for s in clips:
+        w.page_break()
+        w.text(s.stimulus_id, w.clip(s))
 
 
 def _write_block(w: TxtWriter, name: str, block: BlockPlan) -> None:
     repetitions = w.protocol.repetitions
-    if block.familiarization:
-        w.block(f"{name} familiarization")
-        w.text("fam_intro", f"<p>{escape(FAMILIARIZATION_INTRO)}</p>")
-        for s in block.familiarization:
-            w.page_break()
-            w.text(s.stimulus_id, w.clip(s))
+    _write_familiarization(w, name, block.familiarization)
     if block.practice_count:
         w.block(f"{name} practice")
         w.text("practice_intro", f"<p>{escape(PRACTICE_INTRO)}</p>")
@@ -114,7 +128,10 @@ def manual_steps(source: SurveySource) -> list[str]:
     if any(len(g.rotations) > 1 for g in plans):
         steps.append(f"Survey flow: inside each group, add a Randomizer (present 1, evenly) with one Group per "
                      f"rotation ('rotation 0' …); set Embedded Data {ROTATION_FIELD} to its number.")
-    if len(plans[0].rotations[0].blocks) > 1 and p.blocks.order != "fixed":
+    mains = plans[0].rotations[0].main_blocks
+    if mains and p.blocks.order != "fixed":
+        steps.append(_nested_randomizer_step(p, mains))
+    elif len(plans[0].rotations[0].blocks) > 1 and p.blocks.order != "fixed":
         steps.append(f"Survey flow: put each part's blocks (familiarization, practice, test) in a Group and add a "
                      f"Randomizer presenting all {len(plans[0].rotations[0].blocks)} Groups, evenly "
                      f"(block order: {p.blocks.order}).")
@@ -133,3 +150,16 @@ def manual_steps(source: SurveySource) -> list[str]:
         steps.append("Ranking questions were imported as matrices (rows = clips A…, columns = rank 1 = best); "
                      "add validation so that each rank is used once, or change them to Rank Order (drag and drop).")
     return steps + ["JavaScript for the clip questions:\n" + NEXT_AFTER_VIEW_JS]
+
+
+def _nested_randomizer_step(p, mains) -> str:
+    """The survey-flow step for nested blocks: a randomizer over main-block Groups, one over the sub-blocks
+    inside each (with ``order: fixed`` the imported order is already the declared one: no step)."""
+    first = p.blocks.by[0]
+    subs = [block_label({k: v for k, v in b.cell.items() if k != first}) for b in mains[0].blocks]
+    familiarization = ", after its familiarization block," if any(m.familiarization for m in mains) else ""
+    return (f"Survey flow (blocks.nested): make one Group per main block ({', '.join(m.label for m in mains)}) "
+            f"and inside it{familiarization} a Randomizer presenting its {len(subs)} sub-block Groups "
+            f"({', '.join(subs)}: each the sub-block's practice and test blocks), evenly; then add a Randomizer "
+            f"presenting all {len(mains)} main-block Groups, evenly (block order: {p.blocks.order}, the same "
+            "rule at both levels; a main block's sub-blocks always come together).")
