@@ -8,7 +8,8 @@
 >>> sum(1 for t in d.trials if t.participant == 1 and t.kind == "test")
 64
 
-Counterbalancing rules (all seeded, so the same protocol + seed gives the same lists):
+Counterbalancing rules (all seeded, so the same protocol + seed gives the same lists; the orders
+themselves are made in :mod:`stimuli.orders`):
 - between-subject groups: every cell of the between factors gets the same number of participants;
 - block order: ``counterbalanced`` uses the rows of a Williams Latin square (each block equally often
   in each position and, for an even number of blocks, after each other block), dealt out evenly
@@ -20,18 +21,18 @@ Counterbalancing rules (all seeded, so the same protocol + seed gives the same l
   Williams rows over the main blocks with those over the sub-blocks (one sub-block order per
   participant, the same inside each of their main blocks) and deals the combinations as above, listed
   so that a group size they do not divide still keeps each level's orders nearly even
-  (:func:`nested_orders`); ``random`` shuffles the main blocks and, separately inside each,
+  (:func:`stimuli.orders.nested_orders`); ``random`` shuffles the main blocks and, separately inside each,
   the sub-blocks; ``fixed`` keeps the declared order. Labels and block numbers stay those of the
   sub-blocks (``SEX=F|GAIT=walk``, 1…), so trials.csv reads as for flat blocks;
 - practice: ``practice.per_block`` clips drawn from the block's practice pool, whole shuffled copies of
   the pool first when it asks for more (copies numbered repetition 2, 3, …), before every block (with
   nested blocks: every sub-block);
 - familiarisation: the block's bodies before each block; with nested blocks, the main block's bodies
-  once, before its first sub-block (:func:`familiarization_scopes`);
+  once, before its first sub-block (:func:`stimuli.orders.familiarization_scopes`);
 - side-by-side/row placement of an ``alternatives`` factor: ``within`` shows every arrangement to
   everyone; ``between`` rotates arrangements over participants so every position is balanced over
-  every k participants (:func:`arrangement_index`); with three or more levels the arrangements are
-  shuffled by the protocol's seed (:func:`arrangements`), so no row keeps the declared order;
+  every k participants (:func:`stimuli.orders.arrangement_index`); with three or more levels the arrangements are
+  shuffled by the protocol's seed (:func:`stimuli.orders.arrangements`), so no row keeps the declared order;
 - test trial order within a block (``blocks.trials``): ``random`` (the default) shuffles per participant
   with no stimulus twice in a row (when that is possible); ``fixed`` keeps the declared order of the
   factor levels (``test_stimuli``'s order: the first-declared factor varies slowest, screen
@@ -46,12 +47,14 @@ import itertools
 import json
 from collections import Counter
 from dataclasses import asdict, dataclass, field
-from math import gcd
 
 import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.fileio import csv_text, write_all_or_nothing
+from stimuli.orders import (arrangement_index, arrangements, balanced_labels, block_cells, block_label,
+                            counterbalanced_orders, familiarization_scopes, main_blocks, order_balance_notes,
+                            random_block_order, shuffle_no_repeats)
 from stimuli.protocol import Protocol
 
 
@@ -110,69 +113,6 @@ class Design:
 
 def _safe(text: str) -> str:
     return "".join(c if c.isalnum() or c in "_.+" else "_" for c in text)
-
-
-def arrangements(protocol: Protocol) -> list[tuple[str, ...]]:
-    """Screen orders of the alternatives factor's levels (``[()]`` when there is none).
-
-    ``latin_square``: k rows, each level once in each position. With three or more levels the
-    square is a cyclic one with its columns and symbols shuffled by the protocol's seed: the
-    plain cyclic rows (0.5 12 23.5 …, 12 23.5 … 0.5) keep the levels in rising order, wrapped,
-    so a viewer could pick a level by its neighbours; from four levels on, no row keeps the
-    levels in rising or falling order, wrapped or not. ``all``: every permutation, grouped in
-    runs of k that are Latin squares (one permutation's k cyclic symbol shifts), the runs in
-    seeded order: :func:`arrangement_index` deals one run to every k participants.
-
-    >>> from stimuli.protocol import load_protocol
-    >>> rows = arrangements(load_protocol("protocols/thesis_pointlight.yaml"))
-    >>> len(rows), all(sorted(col) == sorted(rows[0]) for col in zip(*rows))
-    (6, True)
-    """
-    alternatives = protocol.factors_with_role("alternatives")
-    if not alternatives:
-        return [()]
-    levels = alternatives[0].levels
-    k = len(levels)
-    kind = protocol.alternatives.arrangements
-    if kind == "fixed":
-        return [tuple(levels)]
-    if k < 3:  # both orders of two levels: nothing to hide, and existing designs stay as they were
-        return [tuple(levels[(i + j) % k] for j in range(k)) for i in range(k)] if kind == "latin_square" \
-            else list(itertools.permutations(levels))
-    rng = np.random.default_rng(protocol.seed)
-    if kind == "latin_square":
-        while True:  # redrawn while a row keeps the levels in rank order (every order of 3 does)
-            symbols, columns = rng.permutation(k), rng.permutation(k)
-            rows = [tuple(levels[symbols[(columns[j] + i) % k]] for j in range(k)) for i in range(k)]
-            if k < 4 or not set(rows) & _rotations(levels):
-                return rows
-    symbols = rng.permutation(k)
-    starts = [(0, *rest) for rest in itertools.permutations(range(1, k))]
-    return [tuple(levels[symbols[(starts[r][j] + i) % k]] for j in range(k))
-            for r in rng.permutation(len(starts)) for i in range(k)]
-
-
-def _rotations(levels: list[str]) -> set[tuple[str, ...]]:
-    """The declared order and its reverse, each rotated: rows that keep the levels in rank order."""
-    return {tuple(order[i:] + order[:i]) for order in (list(levels), list(levels)[::-1]) for i in range(len(levels))}
-
-
-def arrangement_index(n_arrangements: int, k: int, rank: int, condition: int) -> int:
-    """Which of :func:`arrangements` participant ``rank`` (0-based, within the group) sees for the
-    ``condition``-th condition when arrangements are counterbalanced between participants.
-
-    Every k consecutive ranks get one run of k arrangements (a Latin square), each condition a
-    different arrangement, so each level is equally often in each position over every k
-    participants. (Taking the permutations in order, 60 participants would all have seen the
-    first level leftmost: the first 120 of the 720 orders of 6 start with it.)
-
-    >>> [arrangement_index(6, 3, rank, 0) for rank in range(6)]
-    [0, 1, 2, 3, 4, 5]
-    >>> [arrangement_index(3, 3, rank, 1) for rank in range(3)]
-    [1, 2, 0]
-    """
-    runs = max(1, n_arrangements // k)
-    return (rank // k + condition) % runs * k + (rank + condition) % k
 
 
 def _actors_for(protocol: Protocol, levels: dict[str, str]) -> tuple[str, str]:
@@ -252,133 +192,6 @@ def familiarization_stimuli(protocol: Protocol) -> list[Stimulus]:
     return out
 
 
-# -- blocks and orders --------------------------------------------------------------------------
-
-def williams_orders(k: int) -> list[list[int]]:
-    """Rows of a Williams Latin square: balanced for position and (even k) first-order carry-over."""
-    if k == 1:
-        return [[0]]
-    first, low, high = [0], 1, k - 1
-    for i in range(1, k):
-        first.append(low if i % 2 else high)
-        low, high = (low + 1, high) if i % 2 else (low, high - 1)
-    rows = [[(x + r) % k for x in first] for r in range(k)]
-    if k % 2:
-        rows += [list(reversed(row)) for row in rows]
-    return rows
-
-
-def block_cells(protocol: Protocol) -> list[dict[str, str]]:
-    """The blocks in declared order, each a mapping from block factor to level ([{}] = one block)."""
-    names = protocol.blocks.by
-    return [dict(zip(names, combo)) for combo in itertools.product(*(protocol.factor(n).levels for n in names))]
-
-
-def block_label(cell: dict[str, str]) -> str:
-    return "|".join(f"{k}={v}" for k, v in cell.items()) or "all"
-
-
-def main_blocks(protocol: Protocol) -> list[tuple[dict[str, str], list[int]]]:
-    """With ``blocks.nested``: each main block (a level of the first ``blocks.by`` factor) and the
-    indices in :func:`block_cells` of its sub-blocks, in declared order; ``[]`` for flat blocks.
-
-    >>> from stimuli.protocol import load_protocol
-    >>> main_blocks(load_protocol("protocols/exp2_com_vs_average.yaml"))
-    [({'SEX': 'F'}, [0, 1]), ({'SEX': 'M'}, [2, 3])]
-    """
-    if not protocol.blocks.nested:
-        return []
-    main = protocol.blocks.by[0]
-    levels = protocol.factor(main).levels
-    per_main = len(block_cells(protocol)) // len(levels)   # block_cells varies the first factor slowest
-    return [({main: level}, list(range(m * per_main, (m + 1) * per_main))) for m, level in enumerate(levels)]
-
-
-def nested_orders(n_main: int, n_sub: int) -> list[list[int]]:
-    """Counterbalanced nested block orders, as indices into :func:`block_cells`: every Williams row
-    over the main blocks crossed with every Williams row over the sub-blocks (one sub-order for all
-    the main blocks of a participant), a main block's sub-blocks consecutive.
-
-    Crossing ``c`` takes main row ``c mod a`` and sub row ``(c + c div lcm(a, b)) mod b`` (a bijection):
-    every ``a`` consecutive crossings hold each main row once, and inside each run of ``lcm(a, b)``
-    every ``b`` consecutive ones each sub row once. Dealt in turn (:func:`_balanced_labels`), a group
-    size the crossings do not divide thus keeps each level nearly even on its own: 10 participants
-    over Exp. 2's 4 crossings see SEX first 5 / 5 and walk first 5 / 5 (listed main row first, it
-    would be 6 / 4).
-
-    >>> nested_orders(2, 2)
-    [[0, 1, 2, 3], [3, 2, 1, 0], [1, 0, 3, 2], [2, 3, 0, 1]]
-    """
-    mains, subs = williams_orders(n_main), williams_orders(n_sub)
-    a, b = len(mains), len(subs)
-    period = a * b // gcd(a, b)
-    out = []
-    for c in range(a * b):
-        turn, step = divmod(c, period)
-        out.append(_nest(mains[step % a], subs[(step + turn) % b], n_sub))
-    return out
-
-
-def _nest(main_order: list[int], sub_order: list[int], n_sub: int) -> list[int]:
-    """Block indices of main blocks in ``main_order``, each with its sub-blocks in ``sub_order``."""
-    return [m * n_sub + s for m in main_order for s in sub_order]
-
-
-def familiarization_scopes(protocol: Protocol, order: list[dict[str, str]]) -> list[dict[str, str] | None]:
-    """For each block of a participant's ``order`` (block cells), the levels its familiarisation clips
-    must match, or None when it shows none: each block's own cell for flat blocks; with nested blocks
-    the main block's level on the first of its sub-blocks, None on the others.
-
-    >>> from stimuli.protocol import load_protocol
-    >>> p = load_protocol("protocols/exp2_com_vs_average.yaml")
-    >>> familiarization_scopes(p, [{"SEX": "M", "GAIT": "jog"}, {"SEX": "M", "GAIT": "walk"},
-    ...                            {"SEX": "F", "GAIT": "jog"}, {"SEX": "F", "GAIT": "walk"}])
-    [{'SEX': 'M'}, None, {'SEX': 'F'}, None]
-    """
-    if not protocol.blocks.nested:
-        return list(order)
-    main = protocol.blocks.by[0]
-    previous = [None] + [cell[main] for cell in order[:-1]]
-    return [{main: cell[main]} if cell[main] != before else None for cell, before in zip(order, previous)]
-
-
-def shuffle_no_repeats(items: list[str], rng: np.random.Generator) -> list[str]:
-    """A random order of ``items`` with no element twice in a row, when such an order exists.
-
-    >>> import numpy as np
-    >>> order = shuffle_no_repeats(["a", "a", "b", "b", "c"], np.random.default_rng(0))
-    >>> all(x != y for x, y in zip(order, order[1:]))
-    True
-    """
-    counts = Counter(items)
-    keys = list(dict.fromkeys(items))
-    if counts and max(counts.values()) > (len(items) + 1) // 2:
-        return [items[i] for i in rng.permutation(len(items))]  # impossible: plain shuffle
-    out, previous = [], None
-    for _ in range(len(items)):
-        candidates = [k for k in keys if counts[k] and k != previous and _feasible(counts, k)]
-        weights = np.array([counts[k] for k in candidates], dtype=float)
-        previous = candidates[rng.choice(len(candidates), p=weights / weights.sum())]
-        counts[previous] -= 1
-        out.append(previous)
-    return out
-
-
-def _feasible(counts: Counter, chosen: str) -> bool:
-    """After taking ``chosen``, can the rest be ordered without repeats and not start with ``chosen``?"""
-    rest = counts.copy()
-    rest[chosen] -= 1
-    n = sum(rest.values())
-    return all(c <= (n + 1) // 2 for c in rest.values()) and rest[chosen] <= n // 2
-
-
-def _balanced_labels(n: int, k: int, rng: np.random.Generator, start: int = 0) -> list[int]:
-    """``n`` labels from ``range(k)`` as evenly as possible, in random order; the labels dealt are
-    ``start``, ``start + 1``, … (mod k), so that groups dealt one after the other with ``start`` = the
-    number dealt before them share the surplus out evenly over all of them."""
-    return [int(x) for x in rng.permutation([(start + i) % k for i in range(n)])]
-
-
 # -- participants -------------------------------------------------------------------------------
 
 def build_design(protocol: Protocol, participants: int | None = None, seed: int | None = None) -> Design:
@@ -398,19 +211,19 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     rng = np.random.default_rng(seed)
     tests, practices, familiar = test_stimuli(protocol), practice_stimuli(protocol), familiarization_stimuli(protocol)
     blocks = block_cells(protocol)
-    orders = _counterbalanced_orders(protocol, len(blocks))
+    orders = counterbalanced_orders(protocol, len(blocks))
 
-    group_of = _balanced_labels(n, len(group_cells), rng)
+    group_of = balanced_labels(n, len(group_cells), rng)
     trials: list[Trial] = []
     block_orders: dict[int, list[str]] = {}
     dealt = 0  # block orders dealt to the groups before this one: the rotation goes on from there
     for g, groups in enumerate(group_cells):
         members = [p for p in range(n) if group_of[p] == g]
-        order_of = _balanced_labels(len(members), len(orders), rng, dealt) if orders else [0] * len(members)
+        order_of = balanced_labels(len(members), len(orders), rng, dealt) if orders else [0] * len(members)
         dealt += len(members)
         for rank, p in enumerate(members):
             if protocol.blocks.order == "random":
-                order = _random_order(protocol, len(blocks), rng)
+                order = random_block_order(protocol, len(blocks), rng)
             else:
                 order = orders[order_of[rank]] if orders else list(range(len(blocks)))
             block_orders[p + 1] = [block_label(blocks[i]) for i in order]
@@ -425,23 +238,6 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
                   [block_label(b) for b in blocks], block_orders, notes)
 
 
-def _counterbalanced_orders(protocol: Protocol, n_blocks: int) -> list[list[int]] | None:
-    """The block orders dealt to participants (indices into :func:`block_cells`), None unless counterbalanced."""
-    if protocol.blocks.order not in ("counterbalanced", "latin_square"):
-        return None
-    mains = main_blocks(protocol)
-    return nested_orders(len(mains), n_blocks // len(mains)) if mains else williams_orders(n_blocks)
-
-
-def _random_order(protocol: Protocol, n_blocks: int, rng: np.random.Generator) -> list[int]:
-    """A participant's random block order; nested: the main blocks shuffled, then the sub-blocks of each."""
-    mains = main_blocks(protocol)
-    if not mains:
-        return [int(i) for i in rng.permutation(n_blocks)]
-    n_sub = n_blocks // len(mains)
-    return [int(m) * n_sub + int(s) for m in rng.permutation(len(mains)) for s in rng.permutation(n_sub)]
-
-
 def back_to_back_notes(trials: list[Trial]) -> list[str]:
     """A note when some participant sees one test clip twice in a row (a block that holds a single test clip
     per participant, shown ``repetitions`` times: no order can keep its copies apart)."""
@@ -453,26 +249,6 @@ def back_to_back_notes(trials: list[Trial]) -> list[str]:
     return [f"repetitions: {len({a.participant for a, _ in pairs})} participant(s) see the same test clip twice in a "
             f"row ({len(pairs)} time(s); e.g. participant {first.participant}, {first.stimulus_id}, trial "
             f"{first.trial}): their block holds a single test clip, so its repetitions cannot be kept apart"]
-
-
-def order_balance_notes(group_cells: list[dict], group_of: list[int], block_orders: dict[int, list[str]],
-                        order_labels: list[list[str]]) -> list[str]:
-    """A note, with the counts, when the counterbalanced block orders (``order_labels``; none for
-    ``random`` or ``fixed``) cannot be dealt equally often within each between group."""
-    k = len(order_labels)
-    if k < 2 or all(size % k == 0 for size in Counter(group_of).values()):
-        return []
-    counts = {" → ".join(order): Counter() for order in order_labels}
-    for participant, order in block_orders.items():
-        counts[" → ".join(order)][group_of[participant - 1]] += 1
-    if len(group_cells) > 1:
-        rows = "; ".join(f"{order}: " + ", ".join(f"{block_label(cell)} {dealt[g]}" for g, cell in enumerate(group_cells))
-                         + f" (total {sum(dealt.values())})" for order, dealt in counts.items())
-    else:
-        rows = "; ".join(f"{order}: {sum(dealt.values())}" for order, dealt in counts.items())
-    within = " within each between group" if len(group_cells) > 1 else ""
-    return [f"blocks.order: {len(group_of)} participants cannot see the {k} counterbalanced block orders equally "
-            f"often{within}; orders dealt: {rows}. A multiple of {k * len(group_cells)} participants balances them"]
 
 
 def _matches(stimulus: Stimulus, cell: dict[str, str]) -> bool:

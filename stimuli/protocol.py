@@ -252,7 +252,7 @@ class Alternatives(Strict):
 
     ``arrangements``: ``all`` (every permutation), ``latin_square`` (k orders, each level
     once in each position; shuffled by ``seed`` from three levels on, see
-    :func:`stimuli.design.arrangements`), ``fixed`` (the declared order only). ``counterbalance``: ``within``
+    :func:`stimuli.orders.arrangements`), ``fixed`` (the declared order only). ``counterbalance``: ``within``
     (every participant sees every arrangement) or ``between`` (each participant sees one
     arrangement per condition, rotated so positions balance over participants).
     """
@@ -492,7 +492,7 @@ def _test_clips_per_block(p: Protocol) -> int:
             count *= len(f.levels)
     alternatives = p.factors_with_role("alternatives")
     if alternatives and p.alternatives.counterbalance == "within":
-        from stimuli.design import arrangements
+        from stimuli.orders import arrangements
 
         count *= len(arrangements(p))
     return count

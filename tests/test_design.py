@@ -7,7 +7,8 @@ from collections import Counter
 import pandas as pd
 import pytest
 
-from stimuli.design import arrangements, build_design, shuffle_no_repeats, williams_orders
+from stimuli.design import build_design
+from stimuli.orders import arrangements, shuffle_no_repeats, williams_orders
 from stimuli.protocol import load_protocol
 
 
@@ -165,13 +166,13 @@ def test_all_orders_between_participants_balance_positions(tmp_path):
     assert len({s.arrangement for s in shown}) > 6   # not one Latin square for everyone
 
 
-def test_design_docstring_examples():
+@pytest.mark.parametrize("module, examples", [("stimuli.design", 2), ("stimuli.orders", 8)])
+def test_docstring_examples(module, examples):
     import doctest
+    import importlib
 
-    import stimuli.design
-
-    result = doctest.testmod(stimuli.design)
-    assert result.attempted >= 4 and result.failed == 0
+    result = doctest.testmod(importlib.import_module(module))
+    assert result.attempted >= examples and result.failed == 0
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 6])

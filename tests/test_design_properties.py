@@ -7,7 +7,8 @@ from collections import Counter
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from stimuli.design import arrangements, build_design, williams_orders
+from stimuli.design import build_design
+from stimuli.orders import arrangements, williams_orders
 from stimuli.protocol import Protocol
 
 

@@ -275,7 +275,7 @@ def test_missing_jspsych_install_is_a_user_error(tmp_path, run_cli, monkeypatch)
 
 def test_survey_plan_rotations_show_what_the_design_deals(tmp_path):
     """Qualtrics/PsychoPy rotations follow the design's arrangement rule; with `arrangements: all` the
-    design deals Latin-square runs (stimuli.design.arrangement_index), which the plan used to ignore."""
+    design deals Latin-square runs (stimuli.orders.arrangement_index), which the plan used to ignore."""
     from stimuli.survey.plan import build_plan
 
     text = (ROOT / "protocols" / "thesis_pointlight.yaml").read_text()

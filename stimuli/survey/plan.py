@@ -6,7 +6,7 @@ time. This module states what they randomise over, with the same rules as :mod:`
 - each cell of the between factors is one **group** (assigned evenly);
 - when an ``alternatives`` factor is counterbalanced *between* participants, each group splits into
   one **rotation** per arrangement; rotation ``r`` shows condition ``c`` in the arrangement
-  :func:`stimuli.design.arrangement_index` gives participant rank ``r`` (the design's rule; for a
+  :func:`stimuli.orders.arrangement_index` gives participant rank ``r`` (the design's rule; for a
   Latin square ``(r + c) mod k``);
 - each rotation holds the protocol's **blocks** in declared order, each with its familiarisation
   clips (in the design's order), its practice pool (and how many to draw) and its test questions
@@ -22,7 +22,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass, field
 
-from stimuli.design import arrangement_index, arrangements, block_cells, block_label, main_blocks
+from stimuli.orders import arrangement_index, arrangements, block_cells, block_label, main_blocks
 from stimuli.survey.source import StimulusInfo, SurveySource
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from stimuli.design import block_label
+from stimuli.orders import block_label
 from stimuli.survey.plan import BlockPlan, build_plan, export_tag
 from stimuli.survey.qsf import PROTOCOL_FIELD, ROTATION_FIELD
 from stimuli.survey.qsf_questions import NEXT_AFTER_VIEW_JS
