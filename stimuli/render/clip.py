@@ -1,15 +1,16 @@
 """One clip's frames: figures (body + pose sequence) placed on a stage and rendered frame by frame.
 
 Layouts (DESIGN.md): ``treadmill`` (one figure), ``side_by_side`` (two, screen left → right),
-``row`` (k labelled figures), ``point_light`` (one or k dot walkers on black). Figures stand on
-a line across the screen (the camera's right axis on the ground), so every figure is seen from
-the same angle and at the same depth. Skinning is batched per chunk of frames into one
+``row`` (k labelled figures), ``point_light`` (one or k dot walkers on black). Side by side, the
+figures stand on a line across the screen (the camera's right axis on the ground), each turned so
+that it is seen from the same angle and at the same depth; rows are tiled (:func:`tiles`): each
+figure filmed by its own camera, the tiles put side by side. Skinning is batched per chunk of frames into one
 preallocated buffer per figure, whose rows are then uploaded into the figure's GL vertex buffer.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -18,6 +19,12 @@ from stimuli.render.labels import LabelOverlay
 from stimuli.render.scene import Stage, grey_material, hex_colour, over
 
 LAYOUTS = ("treadmill", "side_by_side", "row", "point_light")
+# Rows of k figures are rendered as k tiles, each by the protocol's camera centred on its figure,
+# and put side by side, as the thesis edited its walkers together. One wide camera over the row
+# stretched the outer walkers: a 1920×540 frame with a 40° vertical view spans 104°, and the
+# edge slots came out 1.47× as wide as the central ones (1/cos of their angle), more than the
+# 0.5 → 58 % body-fat strengths themselves (×1.57) in a survey asking which walker looks obese.
+TILED_LAYOUTS = ("row", "point_light")
 SKIN_CHUNK = 32
 
 
@@ -101,8 +108,22 @@ def apply_pose(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ pose[:3, :3].T + pose[:3, 3]
 
 
-def render_frames(look: Look, figures: list[Figure]):
-    """Yield the clip's frames, (H, W, 3) uint8, exactly ``look.n_frames`` of them."""
+def tiles(look: Look, n: int) -> list[tuple[int, Look]]:
+    """Left edge (px) and look of each of ``n`` figures' tiles in a tiled layout, left to right.
+
+    >>> [(x, t.width) for x, t in tiles(Look("row", 1920, 540, 30, 1.0), 6)][:2]
+    [(0, 320), (320, 320)]
+    """
+    edges = np.linspace(0, look.width, n + 1).round().astype(int)
+    return [(int(a), replace(look, width=int(b - a))) for a, b in zip(edges, edges[1:])]
+
+
+def render_frames(look: Look, figures: list[Figure], frame_height_m: float | None = None):
+    """Yield the clip's frames, (H, W, 3) uint8, exactly ``look.n_frames`` of them.
+
+    ``row`` and ``point_light`` rows of several figures are tiled (:data:`TILED_LAYOUTS`);
+    ``frame_height_m`` (default: the tallest figure's height) sets the height the camera frames.
+    """
     from stimuli.motion.markers import body_markers
     from stimuli.render.pointlight import DotFigure
     from stimuli.render.treadmill import Treadmill, belt_period
@@ -115,7 +136,13 @@ def render_frames(look: Look, figures: list[Figure]):
     for f in figures:
         if len(f.rotations) != n or len(f.root_translation) != n:
             raise ValueError(f"figure {f.body.body_id}: {len(f.rotations)} poses for a clip of {n} frames")
-    poses, view = placements(look, len(figures), max(f.body.anthropometry.height_m for f in figures))
+    tallest = frame_height_m or max(f.body.anthropometry.height_m for f in figures)
+    if look.layout in TILED_LAYOUTS and len(figures) > 1:
+        streams = [render_frames(tile, [f], tallest) for (_, tile), f in zip(tiles(look, len(figures)), figures)]
+        for parts in zip(*streams):
+            yield np.concatenate(parts, axis=1)
+        return
+    poses, view = placements(look, len(figures), tallest)
     dots = look.layout == "point_light"
     stage = Stage(view, hex_colour(look.background), lit=not dots)
     roots = [centred_root(f) for f in figures]
