@@ -234,6 +234,15 @@ class Display(Strict):
     body: str | None = Field(default=None, description="actor id whose body is shown when no factor maps to body")
     # The renderer draws the 15 markers of SPEC §1.3 (the thesis's set); other counts were accepted and ignored.
     point_light_markers: int | None = Field(default=None, strict=True, description="15: the only marker set drawn")
+    # Meshes stand on treadmills on a checker floor unless false (the thesis's renders: figures on a
+    # plain background); point lights never have one, so the setting is refused there.
+    floor: bool | None = Field(default=None, strict=True, description="treadmills and checker floor (default true)")
+
+    @model_validator(mode="after")
+    def _floor_is_for_meshes(self):
+        if self.floor is not None and self.layout == "point_light":
+            raise ValueError("floor: point-light walkers are drawn on the background alone; remove floor")
+        return self
 
     @model_validator(mode="after")
     def _markers_are_the_drawn_set(self):
@@ -385,6 +394,8 @@ class Protocol(Strict):
             del data["blocks"]["trials"]     # blocks.trials existed stay byte-identical
         if not self.blocks.nested:           # likewise for blocks.nested
             del data["blocks"]["nested"]
+        if self.display.floor is None:       # and display.floor
+            del data["display"]["floor"]
         return data
 
 

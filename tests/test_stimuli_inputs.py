@@ -281,6 +281,8 @@ def _protocol_variant(tmp_path: Path, source: Path, old: str, new: str) -> Path:
     (POINTLIGHT, 'modifies: "hip_twist+torso_twist"}', 'modifies: "hip_twist+torso_twsit"}',
      "unknown Table 4-1/5-2 row(s) ['torso_twsit']"),
     (POINTLIGHT, '"0.5", "12"', '"zero", "12"', "level 'zero' must be a body-fat %"),
+    (POINTLIGHT, "layout: point_light", "layout: point_light\n  floor: false", "floor: point-light walkers are drawn"),
+    (VALIDATION, "floor: false ", 'floor: "no" ', "display.floor"),
     (VALIDATION, "motion: lean_walk", "motion: lean_wlak", "level_settings.lean_mocap.motion: expected one of"),
     (VALIDATION, "motion: lean_walk", 'motion: "bvh:nothere.bvh"', "nothere.bvh not found"),
     (EXP1, 'background: "#ffffff"', 'background: "notacolour"', "clip.background (line"),

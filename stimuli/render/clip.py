@@ -55,6 +55,7 @@ class Look:
     background: str = "#ffffff"
     labels: tuple[str, ...] = field(default_factory=tuple)
     loop: bool = True           # whole loops over the clip (cadence rounded) or the own cadence, cut
+    floor: bool = True          # treadmills on a checker floor under meshes; False: the plain background
 
     @property
     def n_frames(self) -> int:
@@ -147,7 +148,7 @@ def render_frames(look: Look, figures: list[Figure], frame_height_m: float | Non
     stage = Stage(view, hex_colour(look.background), lit=not dots)
     roots = [centred_root(f) for f in figures]
     treadmills, floor = [], None
-    if not dots:
+    if not dots and look.floor:
         from stimuli.render.treadmill import DECK_HEIGHT_M
 
         floor = stage.add_checker_floor(np.zeros(3), -DECK_HEIGHT_M)
