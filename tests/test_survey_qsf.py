@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from collections import Counter
 from pathlib import Path
 
@@ -19,10 +20,10 @@ BASE = "https://media.example.org/study-1"
 
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory):
-    """Design folders of the four bundled protocols."""
+    """Design folders of the five bundled protocols."""
     root = Path(__file__).resolve().parents[1] / "protocols"
     out = {}
-    for name in ("exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_validation"):
+    for name in ("exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation"):
         folder = tmp_path_factory.mktemp(name)
         write_design(build_design(load_protocol(root / f"{name}.yaml")), folder)
         out[name] = folder
@@ -108,6 +109,21 @@ def test_flow_and_block_elements_have_the_reference_keys(qsfs):
         in_blocks = [e["QuestionID"] for b in blocks(qsf).values() for e in b["BlockElements"]
                      if e["Type"] == "Question"]
         assert sorted(in_blocks) == sorted(q["QuestionID"] for q in questions(qsf))
+
+
+def test_question_descriptions_are_plain_text_as_qualtrics_writes_them(qsfs):
+    """Qualtrics exports ``QuestionDescription`` (also the SQ ``SecondaryAttribute``, the label in the data
+    export's second header row) as plain text: tags stripped and entities decoded (a real export has
+    ``&nbsp;`` in the text and U+00A0 in the description). The escaped question text must not leak
+    ``&#x27;`` into it (``&lt;``/``&gt;`` may stay: protocol markup is never raw, see test_survey_exports)."""
+    for qsf in qsfs.values():
+        for element in elements(qsf, "SQ"):
+            description = element["Payload"]["QuestionDescription"]
+            assert element["SecondaryAttribute"] == description
+            assert "<" not in description and not re.search(r"&(#x27|#39|quot|amp);", description), description
+    pointlight = [q for q in answered(qsfs["thesis_pointlight"])]
+    assert {q["QuestionDescription"] for q in pointlight} == {"Which walker looks like an obese person's walk?"}
+    assert all("person&#x27;s walk?" in q["QuestionText"] for q in pointlight)   # the HTML stays escaped
 
 
 # -- the procedure ----------------------------------------------------------------------------------

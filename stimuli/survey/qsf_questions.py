@@ -31,9 +31,21 @@ NEXT_AFTER_VIEW_JS = """Qualtrics.SurveyEngine.addOnload(function () {
 
 
 def plain(text: str, limit: int = 100) -> str:
-    """HTML → short plain text, as Qualtrics shows in its editor (``QuestionDescription``)."""
+    """HTML → short plain text, as Qualtrics shows in its editor (``QuestionDescription``).
+
+    Qualtrics's own exports decode entities here (``&nbsp;`` in the text, U+00A0 in the description),
+    so quotes and ``&`` are decoded; ``&lt;``/``&gt;`` stay encoded, so that protocol markup never
+    appears as raw tags anywhere in the file.
+
+    >>> plain("<p>An obese person&#x27;s &quot;walk&quot; &amp; &lt;b&gt;</p>")
+    'An obese person\\'s "walk" & &lt;b&gt;'
+    """
     flat = " ".join(re.sub(r"<[^>]+>", " ", text).split())
-    return flat[:limit]
+    flat = re.sub(r"&(#x27|quot|amp);", lambda m: _TEXT_ENTITIES[m.group(1)], flat)
+    return re.sub(r"&[a-z]*$", "", flat[:limit])          # never end on half an entity
+
+
+_TEXT_ENTITIES = {"#x27": "'", "quot": '"', "amp": "&"}
 
 
 def _element(survey_id: str, payload: dict) -> dict:
