@@ -237,11 +237,21 @@ class Display(Strict):
     # Meshes stand on treadmills on a checker floor unless false (the thesis's renders: figures on a
     # plain background); point lights never have one, so the setting is refused there.
     floor: bool | None = Field(default=None, strict=True, description="treadmills and checker floor (default true)")
+    label_position: Literal["above", "below"] | None = Field(default=None, description="labels above (default) or below")
+    label_colour: str | None = Field(default=None, pattern=r"^#[0-9a-fA-F]{6}$",
+                                     description="#rrggbb (default: black or white against the background)")
 
     @model_validator(mode="after")
     def _floor_is_for_meshes(self):
         if self.floor is not None and self.layout == "point_light":
             raise ValueError("floor: point-light walkers are drawn on the background alone; remove floor")
+        return self
+
+    @model_validator(mode="after")
+    def _label_style_needs_labels(self):
+        styled = [k for k in ("label_position", "label_colour") if getattr(self, k) is not None]
+        if styled and not self.labels:
+            raise ValueError(f"{' and '.join(styled)}: no labels to draw; give display.labels or remove it")
         return self
 
     @model_validator(mode="after")
@@ -394,8 +404,9 @@ class Protocol(Strict):
             del data["blocks"]["trials"]     # blocks.trials existed stay byte-identical
         if not self.blocks.nested:           # likewise for blocks.nested
             del data["blocks"]["nested"]
-        if self.display.floor is None:       # and display.floor
-            del data["display"]["floor"]
+        for key in ("floor", "label_position", "label_colour"):   # and the display's later settings
+            if getattr(self.display, key) is None:
+                del data["display"][key]
         return data
 
 

@@ -91,14 +91,14 @@ def test_a_walker_looks_the_same_in_every_place_of_the_row(protocol_path):
     same = [dataclasses.replace(figures[1], label=f.label) for f in figures]   # the 12 % walker six times
     frames = np.stack(list(render_frames(look, same)))
     lit = frames.max(axis=-1) > 100
-    lit[:, : int(0.15 * look.height)] = False                                  # not the labels
+    lit[:, int(0.85 * look.height):] = False                                   # not the labels beneath
     widths = []
     for k in range(6):
         columns = np.nonzero(lit[:, :, k * 320:(k + 1) * 320].any(axis=(0, 1)))[0]
         widths.append(int(columns.max() - columns.min()))
     assert max(widths) - min(widths) <= 1, widths
-    below_labels = frames[:, int(0.15 * look.height):]
-    assert np.array_equal(below_labels[:, :, :320], below_labels[:, :, 640:960])   # the same walker, the same pixels
+    above_labels = frames[:, :int(0.85 * look.height)]
+    assert np.array_equal(above_labels[:, :, :320], above_labels[:, :, 640:960])   # the same walker, the same pixels
 
 
 def test_point_light_row_shows_six_walkers_of_15_dots(protocol_path):
@@ -110,10 +110,12 @@ def test_point_light_row_shows_six_walkers_of_15_dots(protocol_path):
     frames = np.stack(list(render_frames(look, figures)))
     xy = _projected(look, figures)
     radius_px = 0.5 * look.height / np.tan(np.radians(look.fov_deg) / 2) * DOT_RADIUS_M / look.distance_m
-    top = int(xy[..., 1].min() - 2 * radius_px - 2)          # the labels A–F are above the dots
-    labels = np.array([ndimage.label(f[:top].max(axis=-1) > 100)[1] for f in frames])
+    bottom = int(xy[..., 1].max() + 2 * radius_px + 2)       # the labels A–F are beneath the dots, in red
+    labels = np.array([ndimage.label(f[bottom:].max(axis=-1) > 100)[1] for f in frames])
+    text = frames[:, bottom:][frames[:, bottom:].max(axis=-1) > 100]
+    assert (text[:, 0] > 2 * text[:, 1].astype(int)).all(), "red lettering beneath each walker (section 4.3)"
     assert (labels == 6).all(), labels
-    counts = np.array([ndimage.label(f[top:].max(axis=-1) > 100)[1] for f in frames])
+    counts = np.array([ndimage.label(f[:bottom].max(axis=-1) > 100)[1] for f in frames])
     gaps = np.linalg.norm(xy[:, :, None] - xy[:, None], axis=-1) + np.eye(90) * 1e9
     apart = gaps.min(axis=(1, 2)) > 2 * radius_px + 3
     assert apart.sum() >= 2, "some frames should show all 90 dots apart"

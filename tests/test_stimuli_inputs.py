@@ -283,6 +283,8 @@ def _protocol_variant(tmp_path: Path, source: Path, old: str, new: str) -> Path:
     (POINTLIGHT, '"0.5", "12"', '"zero", "12"', "level 'zero' must be a body-fat %"),
     (POINTLIGHT, "layout: point_light", "layout: point_light\n  floor: false", "floor: point-light walkers are drawn"),
     (VALIDATION, "floor: false ", 'floor: "no" ', "display.floor"),
+    (EXP1, "layout: treadmill ", "label_position: below\n  layout: treadmill ", "label_position: no labels to draw"),
+    (POINTLIGHT, 'label_colour: "#ff0000"', "label_colour: red", "label_colour"),
     (VALIDATION, "motion: lean_walk", "motion: lean_wlak", "level_settings.lean_mocap.motion: expected one of"),
     (VALIDATION, "motion: lean_walk", 'motion: "bvh:nothere.bvh"', "nothere.bvh not found"),
     (EXP1, 'background: "#ffffff"', 'background: "notacolour"', "clip.background (line"),

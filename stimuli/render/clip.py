@@ -56,6 +56,8 @@ class Look:
     labels: tuple[str, ...] = field(default_factory=tuple)
     loop: bool = True           # whole loops over the clip (cadence rounded) or the own cadence, cut
     floor: bool = True          # treadmills on a checker floor under meshes; False: the plain background
+    labels_below: bool = False  # the labels under the figures instead of above them
+    label_colour: str = ""      # #rrggbb; "" = black or white, whichever the background shows
 
     @property
     def n_frames(self) -> int:
@@ -168,7 +170,8 @@ def render_frames(look: Look, figures: list[Figure], frame_height_m: float | Non
     x0, y0, x1, y1 = region = dynamic_region(view, figures, roots, poses, treadmills, dots)
     offsets = [p[:3, 3] for p in poses]
     labels = [f.label for f in figures]
-    overlay = LabelOverlay(view, labels, offsets, look.background) if any(labels) else None
+    overlay = LabelOverlay(view, labels, offsets, look.background, look.labels_below,
+                           look.label_colour or None) if any(labels) else None
     under = background[y0:y1, x0:x1]
     for i in range(n):
         for a in animated:

@@ -1,4 +1,4 @@
-"""Text labels (A, B, …) drawn over the frames, above each figure.
+"""Text labels (A, B, …) drawn over the frames, above (or below) each figure.
 
 The labels never move, so they are rasterised once per clip (Pillow, anti-aliased) into an
 alpha mask and blended into each frame with numpy.
@@ -12,15 +12,18 @@ from PIL import Image, ImageDraw, ImageFont
 from stimuli.render.scene import hex_colour
 
 
-def _text_colour(background: str) -> tuple[int, int, int]:
-    """Black on light backgrounds, white on dark ones."""
+def _text_colour(background: str, colour: str | None = None) -> tuple[int, int, int]:
+    """``colour`` (#rrggbb) if given, else black on light backgrounds and white on dark ones."""
+    if colour:
+        return tuple(int(round(255 * c)) for c in hex_colour(colour))
     return (0, 0, 0) if sum(hex_colour(background)) > 1.5 else (255, 255, 255)
 
 
 class LabelOverlay:
-    """Labels centred horizontally over each figure's slot, near the top of the frame."""
+    """Labels centred horizontally on each figure's slot, near the top (or the bottom) of the frame."""
 
-    def __init__(self, view, labels: list[str], offsets: list[np.ndarray], background: str):
+    def __init__(self, view, labels: list[str], offsets: list[np.ndarray], background: str,
+                 below: bool = False, colour: str | None = None):
         w, h = view.width, view.height
         mask = Image.new("L", (w, h), 0)
         draw = ImageDraw.Draw(mask)
@@ -29,11 +32,12 @@ class LabelOverlay:
             if not label:
                 continue
             x, _ = view.project(np.asarray(offset, float))
-            draw.text((float(x), 0.03 * h), label, fill=255, font=font, anchor="mt")
+            draw.text((float(x), 0.97 * h if below else 0.03 * h), label, fill=255, font=font,
+                      anchor="mb" if below else "mt")
         self.alpha = (np.asarray(mask, np.float32) / 255.0)[..., None]
         rows, cols = np.nonzero(self.alpha[..., 0])
         self.box = (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1) if rows.size else None
-        self.colour = np.array(_text_colour(background), np.float32)
+        self.colour = np.array(_text_colour(background, colour), np.float32)
 
     def apply(self, frame: np.ndarray) -> np.ndarray:
         """Blend the labels into ``frame`` (returns a new array)."""

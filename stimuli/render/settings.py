@@ -78,7 +78,8 @@ def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False)
     return Look(layout=protocol.display.layout, width=width, height=height, fps=rate,
                 duration_s=float(clip.duration_s), azimuth_deg=azimuth, elevation_deg=camera.elevation_deg,
                 distance_m=camera.distance_m, fov_deg=camera.fov_deg, background=clip.background, labels=labels,
-                loop=clip.loop, floor=protocol.display.floor is not False)
+                loop=clip.loop, floor=protocol.display.floor is not False,
+                labels_below=protocol.display.label_position == "below", label_colour=protocol.display.label_colour or "")
 
 
 @functools.lru_cache(maxsize=1)
