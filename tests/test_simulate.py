@@ -7,6 +7,7 @@ import itertools
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from analysis.errors import AnalysisError
@@ -186,3 +187,12 @@ def test_simulating_more_participants_than_the_design_notes_the_reused_lists(des
     code, _, err = run_cli("simulate", str(design.directory), "--participants", "16", "--seed", "4",
                            "--out", str(tmp_path / "s.csv"))
     assert code == 0 and "reuses" not in err
+
+
+@pytest.mark.parametrize("protocol", ["thesis_pointlight", "thesis_mesh"])
+def test_default_thesis_models_vote_for_the_stronger_walkers(designs, protocol):
+    """Both 6-AFC surveys have a bundled model (the mesh survey had none: a null model, flat votes)."""
+    sim = simulate_responses(designs[protocol], load_model(None, designs[protocol]), 120, seed=4)
+    chosen = [positions.split("|")[int(position) - 1] for positions, position in zip(sim["positions"], sim["position"])]
+    votes = pd.Series(chosen).value_counts()
+    assert votes["58"] > 2 * votes["0.5"], votes.to_dict()
