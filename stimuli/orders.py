@@ -242,3 +242,26 @@ def order_balance_notes(group_cells: list[dict], group_of: list[int], block_orde
     within = " within each between group" if len(group_cells) > 1 else ""
     return [f"blocks.order: {len(group_of)} participants cannot see the {k} counterbalanced block orders equally "
             f"often{within}; orders dealt: {rows}. A multiple of {k * len(group_cells)} participants balances them"]
+
+
+def arrangement_balance_notes(protocol: Protocol, group_sizes: list[int]) -> list[str]:
+    """A note when screen arrangements rotate between participants (:func:`arrangement_index`) but a
+    between group's size is not a multiple of the k levels, so some levels stand in some places more
+    often (each group's leftover participants start the rotation again).
+
+    >>> from stimuli.protocol import load_protocol
+    >>> arrangement_balance_notes(load_protocol("protocols/thesis_pointlight.yaml"), [67])[0][:60]
+    'alternatives: 67 participants cannot see each of the 6 STREN'
+    """
+    shown = arrangements(protocol)
+    if protocol.alternatives.counterbalance != "between" or len(shown) < 2:
+        return []
+    k = len(shown[0])
+    if all(size % k == 0 for size in group_sizes):
+        return []
+    factor = protocol.factors_with_role("alternatives")[0].name
+    per_group = " in each between group" if len(group_sizes) > 1 else ""
+    return [f"alternatives: {sum(group_sizes)} participants cannot see each of the {k} {factor} levels equally "
+            f"often in each screen position{per_group} (group sizes {', '.join(map(str, group_sizes))}); a multiple "
+            f"of {k * len(group_sizes)} participants balances them"]
+

@@ -262,3 +262,11 @@ def test_a_block_of_one_clip_shown_twice_gets_a_note(protocol_path, tmp_path):
     assert any("see the same test clip twice in a row" in n for n in notes), notes
     assert not [n for n in build_design(load_protocol(protocol_path("exp1_shape_motion")), seed=1).notes
                 if "twice in a row" in n]
+
+
+def test_positions_that_cannot_balance_get_a_note():
+    """Block orders that a group size does not divide had a note; screen positions had none (the thesis's
+    n = 67 viewers of six walkers show one strength in one place 12 times and the others 11)."""
+    protocol = load_protocol("protocols/thesis_pointlight.yaml")
+    assert [n for n in build_design(protocol, participants=67).notes if n.startswith("alternatives:")]
+    assert not [n for n in build_design(protocol, participants=60).notes if n.startswith("alternatives:")]

@@ -406,3 +406,18 @@ def test_every_export_is_deterministic(exp2, tmp_path):
         export_survey(exp2, fmt, tmp_path / "2" / name, BASE)
         assert digest(tmp_path / "1" / name) == digest(tmp_path / "2" / name), fmt
     assert qsf_text(load_source(exp2), BASE) == (tmp_path / "1" / "s.qsf").read_text()
+
+
+def test_psychopy_export_over_a_nested_one_removes_its_files_but_not_the_labs(tmp_path):
+    """Exporting a flat design into the folder of a nested one left main_blocks.csv and the per-SEX files,
+    which a Builder experiment set up for the nested layout went on reading."""
+    out = tmp_path / "psychopy"
+    export_survey(folder_of(tmp_path, exp2_text("true"), "nested"), "psychopy", out)
+    assert (out / "main_blocks.csv").is_file() and (out / "conditions" / "SEX-F_blocks.csv").is_file()
+    (out / "study.psyexp").write_text("<PsychoPy2experiment/>")          # the lab's own experiment
+    export_survey(folder_of(tmp_path, exp2_text(None), "flat"), "psychopy", out)
+    assert not (out / "main_blocks.csv").exists()
+    assert not list((out / "conditions").glob("SEX-?_blocks.csv"))
+    assert (out / "study.psyexp").read_text() == "<PsychoPy2experiment/>"
+    listed = {row["test_file"] for row in csv.DictReader((out / "blocks.csv").read_text().splitlines())}
+    assert listed and all((out / name).is_file() for name in listed)

@@ -124,6 +124,10 @@ def test_question_descriptions_are_plain_text_as_qualtrics_writes_them(qsfs):
     pointlight = [q for q in answered(qsfs["thesis_pointlight"])]
     assert {q["QuestionDescription"] for q in pointlight} == {"Which walker looks like an obese person's walk?"}
     assert all("person&#x27;s walk?" in q["QuestionText"] for q in pointlight)   # the HTML stays escaped
+    from stimuli.survey.qsf_questions import plain
+
+    assert plain("Rock&amp;roll") == "Rock&roll"                # an ampersand near the end is kept
+    assert plain("Rock&amp;roll", limit=6) == "Rock"            # a cut never ends inside an entity
 
 
 # -- the procedure ----------------------------------------------------------------------------------

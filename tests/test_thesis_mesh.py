@@ -246,3 +246,23 @@ def test_one_video_renders_six_separate_mesh_walkers(tmp_path):
         for box in walkers:
             patch = grey[box][lit[box]]
             assert patch.size > 60 and np.median(patch) < 230
+
+
+def test_labels_below_on_the_floor_are_drawn_dark(tmp_path):
+    """Labels beneath the walkers sit on the light checker floor; their default colour was chosen against
+    the black background (white), which left them barely visible."""
+    from stimuli.render import render_protocol
+    from stimuli.render.video import read_video
+
+    text = (PROTOCOLS / "thesis_mesh.yaml").read_text()
+    old = "  floor: false               # on the black background alone, as the thesis rendered them\n"
+    assert old in text
+    data = yaml.safe_load(text.replace(old, "  label_position: below\n"))
+    data["clip"].update(duration_s=1, cycles=1)
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    report = render_protocol(tmp_path / "m.yaml", tmp_path / "out", resolution="640x180", fps=5,
+                             only="torso_swagger-", limit=1, workers=1, progress=False, sheet=False)
+    frame = read_video(tmp_path / "out" / "clips" / f"{report.rendered[0]}.mp4")[0][0].astype(int)
+    strip = frame[int(0.9 * 180):, :, :].max(axis=-1)          # the labels' band, on the floor
+    assert np.median(strip) > 150, "the floor under the labels is light"
+    assert (strip < 60).sum() > 30, "dark lettering on it"

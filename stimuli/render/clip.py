@@ -170,8 +170,8 @@ def render_frames(look: Look, figures: list[Figure], frame_height_m: float | Non
     x0, y0, x1, y1 = region = dynamic_region(view, figures, roots, poses, treadmills, dots)
     offsets = [p[:3, 3] for p in poses]
     labels = [f.label for f in figures]
-    overlay = LabelOverlay(view, labels, offsets, look.background, look.labels_below,
-                           look.label_colour or None) if any(labels) else None
+    overlay = LabelOverlay(view, labels, offsets, look.background, look.labels_below, look.label_colour or None,
+                           backdrop=background) if any(labels) else None
     under = background[y0:y1, x0:x1]
     for i in range(n):
         for a in animated:

@@ -23,7 +23,10 @@ class LabelOverlay:
     """Labels centred horizontally on each figure's slot, near the top (or the bottom) of the frame."""
 
     def __init__(self, view, labels: list[str], offsets: list[np.ndarray], background: str,
-                 below: bool = False, colour: str | None = None):
+                 below: bool = False, colour: str | None = None, backdrop: np.ndarray | None = None):
+        """``colour`` (#rrggbb) or, by default, black or white against what the labels cover: the
+        rendered ``backdrop`` (H, W, 3) under them when given (labels below the figures sit on the
+        floor, not on the background colour), else the ``background`` colour."""
         w, h = view.width, view.height
         mask = Image.new("L", (w, h), 0)
         draw = ImageDraw.Draw(mask)
@@ -38,6 +41,9 @@ class LabelOverlay:
         rows, cols = np.nonzero(self.alpha[..., 0])
         self.box = (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1) if rows.size else None
         self.colour = np.array(_text_colour(background, colour), np.float32)
+        if colour is None and backdrop is not None and self.box is not None:
+            covered = backdrop[self.alpha[..., 0] > 0.5]
+            self.colour = np.full(3, 0.0 if covered.mean() > 127.5 else 255.0, np.float32)
 
     def apply(self, frame: np.ndarray) -> np.ndarray:
         """Blend the labels into ``frame`` (returns a new array)."""

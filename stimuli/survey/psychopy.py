@@ -121,4 +121,17 @@ def write_psychopy(source: SurveySource, out_dir: str | Path) -> list[Path]:
     out_dir = Path(out_dir)
     prefix = os.path.relpath(source.folder.resolve(), out_dir.resolve()).replace(os.sep, "/") + "/"
     prefix = "" if prefix == "./" else prefix
-    return write_all_or_nothing(out_dir, psychopy_files(source, prefix))
+    files = psychopy_files(source, prefix)
+    written = write_all_or_nothing(out_dir, files)
+    _remove_stale(out_dir, files)
+    return written
+
+
+def _remove_stale(out_dir: Path, files: dict[str, str]) -> None:
+    """Delete what an earlier export wrote and this one does not (``main_blocks.csv`` of a nested design,
+    another design's ``conditions/*.csv``): a Builder experiment would go on reading them. The folder's
+    other files (the lab's ``.psyexp``, data) are never touched."""
+    ours = [out_dir / "main_blocks.csv", *sorted((out_dir / "conditions").glob("*.csv"))]
+    for path in ours:
+        if path.relative_to(out_dir).as_posix() not in files:
+            path.unlink(missing_ok=True)

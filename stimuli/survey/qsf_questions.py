@@ -39,10 +39,13 @@ def plain(text: str, limit: int = 100) -> str:
 
     >>> plain("<p>An obese person&#x27;s &quot;walk&quot; &amp; &lt;b&gt;</p>")
     'An obese person\\'s "walk" & &lt;b&gt;'
+    >>> plain("Rock&amp;roll"), plain("Rock&amp;roll", limit=6)
+    ('Rock&roll', 'Rock')
     """
     flat = " ".join(re.sub(r"<[^>]+>", " ", text).split())
-    flat = re.sub(r"&(#x27|quot|amp);", lambda m: _TEXT_ENTITIES[m.group(1)], flat)
-    return re.sub(r"&[a-z]*$", "", flat[:limit])          # never end on half an entity
+    if len(flat) > limit:   # cut, but never inside an entity
+        flat = re.sub(r"&[#a-z0-9]*$", "", flat[:limit])
+    return re.sub(r"&(#x27|quot|amp);", lambda m: _TEXT_ENTITIES[m.group(1)], flat)
 
 
 _TEXT_ENTITIES = {"#x27": "'", "quot": '"', "amp": "&"}
