@@ -415,9 +415,11 @@ def test_psychopy_export_over_a_nested_one_removes_its_files_but_not_the_labs(tm
     export_survey(folder_of(tmp_path, exp2_text("true"), "nested"), "psychopy", out)
     assert (out / "main_blocks.csv").is_file() and (out / "conditions" / "SEX-F_blocks.csv").is_file()
     (out / "study.psyexp").write_text("<PsychoPy2experiment/>")          # the lab's own experiment
+    (out / "conditions" / "my_lab_extra.csv").write_text("a,b\n1,2\n")      # and its own conditions
     export_survey(folder_of(tmp_path, exp2_text(None), "flat"), "psychopy", out)
     assert not (out / "main_blocks.csv").exists()
     assert not list((out / "conditions").glob("SEX-?_blocks.csv"))
     assert (out / "study.psyexp").read_text() == "<PsychoPy2experiment/>"
+    assert (out / "conditions" / "my_lab_extra.csv").read_text() == "a,b\n1,2\n"
     listed = {row["test_file"] for row in csv.DictReader((out / "blocks.csv").read_text().splitlines())}
     assert listed and all((out / name).is_file() for name in listed)

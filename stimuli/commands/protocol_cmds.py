@@ -41,7 +41,9 @@ def run_validate(args: argparse.Namespace) -> int:
     kinds = {k: sum(s.kind == k for s in design.stimuli) for k in ("test", "practice", "familiarization")}
     per_participant = sum(t.participant == 1 and t.kind == "test" for t in design.trials)
     print(f"  stimuli: {kinds['test']} test, {kinds['practice']} practice, {kinds['familiarization']} familiarization")
-    print(f"  {protocol.participants} participants, {len(design.blocks)} block(s), "
+    nesting = (f" ({protocol.blocks.by[0]} blocks holding {' × '.join(protocol.blocks.by[1:])} sub-blocks)"
+               if protocol.blocks.nested else "")
+    print(f"  {protocol.participants} participants, {len(design.blocks)} block(s){nesting}, "
           f"{per_participant} test trials per participant")
     if protocol.gaits:
         print(f"  {fits_summary(protocol)}")

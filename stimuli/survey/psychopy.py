@@ -38,6 +38,7 @@ their name (``SEX=F|GAIT=walk`` → ``SEX-F_GAIT-walk``).
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from stimuli.fileio import csv_text, write_all_or_nothing
@@ -127,11 +128,15 @@ def write_psychopy(source: SurveySource, out_dir: str | Path) -> list[Path]:
     return written
 
 
+# The names this export gives its files; anything else in the folder belongs to the lab.
+_EXPORTED = re.compile(r"main_blocks\.csv|conditions/[^/]+_(test|practice|familiarization|blocks)\.csv")
+
+
 def _remove_stale(out_dir: Path, files: dict[str, str]) -> None:
     """Delete what an earlier export wrote and this one does not (``main_blocks.csv`` of a nested design,
-    another design's ``conditions/*.csv``): a Builder experiment would go on reading them. The folder's
-    other files (the lab's ``.psyexp``, data) are never touched."""
-    ours = [out_dir / "main_blocks.csv", *sorted((out_dir / "conditions").glob("*.csv"))]
-    for path in ours:
-        if path.relative_to(out_dir).as_posix() not in files:
-            path.unlink(missing_ok=True)
+    another design's ``conditions/<block>_test.csv`` …): a Builder experiment would go on reading them.
+    Only files named as this export names them go; the lab's own (``.psyexp``, data, other CSVs) stay."""
+    for path in sorted(out_dir.glob("main_blocks.csv")) + sorted((out_dir / "conditions").glob("*.csv")):
+        name = path.relative_to(out_dir).as_posix()
+        if name not in files and _EXPORTED.fullmatch(name):
+            path.unlink()

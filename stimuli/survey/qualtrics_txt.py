@@ -126,7 +126,8 @@ def manual_steps(source: SurveySource) -> list[str]:
                      f"Group per between group ({', '.join(g.label for g in plans)}); in each Group set Embedded "
                      f"Data {fields} to the group's level(s) and put that group's blocks inside.")
     if any(len(g.rotations) > 1 for g in plans):
-        steps.append(f"Survey flow: inside each group, add a Randomizer (present 1, evenly) with one Group per "
+        where = "inside each group, " if len(plans) > 1 else ""
+        steps.append(f"Survey flow: {where}add a Randomizer (present 1, evenly) with one Group per "
                      f"rotation ('rotation 0' …); set Embedded Data {ROTATION_FIELD} to its number.")
     mains = plans[0].rotations[0].main_blocks
     if mains and p.blocks.order != "fixed":
