@@ -52,7 +52,8 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.fileio import csv_text, write_all_or_nothing
-from stimuli.orders import (arrangement_balance_notes, arrangement_index, arrangements, balanced_labels,
+from stimuli.orders import (arrangement_balance_notes, arrangement_count_notes, arrangement_index, arrangements,
+                            balanced_labels,
                             block_cells, block_label,
                             counterbalanced_orders, familiarization_scopes, main_blocks, order_balance_notes,
                             random_block_order, shuffle_no_repeats)
@@ -234,7 +235,8 @@ def build_design(protocol: Protocol, participants: int | None = None, seed: int 
     block_orders = dict(sorted(block_orders.items()))
     order_labels = [[block_label(blocks[i]) for i in order] for order in orders or []]
     notes = (order_balance_notes(group_cells, group_of, block_orders, order_labels)
-             + arrangement_balance_notes(protocol, list(Counter(group_of).values())) + practice_notes(protocol)
+             + arrangement_balance_notes(protocol, list(Counter(group_of).values()))
+             + arrangement_count_notes(protocol) + practice_notes(protocol)
              + back_to_back_notes(trials))
     return Design(protocol, n, seed, tests + practices + familiar, trials,
                   [block_label(b) for b in blocks], block_orders, notes)

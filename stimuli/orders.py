@@ -265,3 +265,22 @@ def arrangement_balance_notes(protocol: Protocol, group_sizes: list[int]) -> lis
             f"often in each screen position{per_group} (group sizes {', '.join(map(str, group_sizes))}); a multiple "
             f"of {k * len(group_sizes)} participants balances them"]
 
+
+def arrangement_count_notes(protocol: Protocol) -> list[str]:
+    """A note when ``arrangements: all`` makes far more screen orders than a Latin square needs: every
+    one is a clip to render, and a Qualtrics rotation group (its randomizer then balances the groups,
+    not the positions).
+
+    >>> from stimuli.protocol import load_protocol
+    >>> p = load_protocol("protocols/thesis_pointlight.yaml")
+    >>> arrangement_count_notes(p.model_copy(update={"alternatives": p.alternatives.model_copy(
+    ...     update={"arrangements": "all"})}))[0][:57]
+    'alternatives.arrangements: all makes 720 screen orders of'
+    """
+    shown = arrangements(protocol)
+    k = len(shown[0])
+    if protocol.alternatives.arrangements != "all" or k < 4:
+        return []
+    return [f"alternatives.arrangements: all makes {len(shown)} screen orders of the {k} levels per condition, each a "
+            f"clip to render; latin_square balances the positions with {k}"]
+

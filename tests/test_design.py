@@ -164,6 +164,7 @@ def test_all_orders_between_participants_balance_positions(tmp_path):
         counts = Counter((s.levels["PARAMETER"], s.arrangement[position]) for s in shown)
         assert set(counts.values()) == {10}, position
     assert len({s.arrangement for s in shown}) > 6   # not one Latin square for everyone
+    assert any(n.startswith("alternatives.arrangements: all makes 720 screen orders") for n in design.notes)
 
 
 @pytest.mark.parametrize("module, examples", [("stimuli.design", 2), ("stimuli.orders", 8)])
