@@ -63,7 +63,9 @@ def test_balance_factor_zero_for_reference_and_grows_with_weight_gap(bodies):
                                       inertia.segment_masses(body.segments, body.anthropometry.mass_kg),
                                       ref.rig.rest_heads[0], body.rig.rest_heads[0])
 
-    assert b(bodies["ref"]) == 0.0
+    # Two fits of one body agree to the last few bits only (threaded BLAS sums in another order):
+    # a micrometre is far below any balance shift this test or the paper cares about.
+    assert b(bodies["ref"]) == pytest.approx(0.0, abs=1e-6)
     assert b(bodies["lo"]) > 0 and b(bodies["hi"]) > 0
 
 
@@ -103,7 +105,7 @@ def test_ragdoll_model_mass_dofs_and_rest_pose(bodies):
 def test_reference_body_tracks_within_3_degrees_without_falling(ref_result):
     rep = ref_result.report
     assert not rep["fell"]
-    assert rep["b_m"] == 0.0
+    assert rep["b_m"] == pytest.approx(0.0, abs=1e-6)   # same body fitted twice: equal to float noise
     assert rep["tracking_rms_deg_overall"] <= 3.0
     assert max(rep["tracking_rms_deg"].values()) <= 5.0
     assert rep["rate_hz"] >= 500 and rep["simulated_s"] >= 4.0
@@ -194,7 +196,8 @@ def test_cli_retarget_writes_motion_and_report(run_cli, walk, tmp_path):
     assert len(report["segments"]) == 15
     assert (tmp_path / "com.npz").is_file()
     # the generated walk records no body weight: the target is its reference, and the user is told
-    assert report["b_m"] == 0 and "records no weight or BMI of its own body" in err
+    # the body is fitted twice (reference and target); its CoM agrees to float noise (1.1e-16 seen), not bit for bit
+    assert report["b_m"] == pytest.approx(0.0, abs=1e-6) and "records no weight or BMI of its own body" in err
 
 
 def test_cli_retarget_measures_b_against_the_motions_own_body(run_cli, walk, tmp_path):
