@@ -354,7 +354,7 @@ class CompiledDesign:
             with np.errstate(divide="ignore", invalid="ignore"):
                 gg = tr * tr / (d * tr2)
                 hf = ((n + 1) * d * gg - 2) / (d * (n - d * gg))
-                w, pw = mauchly(sscp, tr, n)
+                w, pw = mauchly(sscp, tr, n, cells=self.design.n_cells)
                 logdet = np.log(w) + d * np.log(tr / d)   # NaN where det ≤ 0 or n < d
             singular = self._singular(sscp, tr, logdet, tol, min(d, n))
             for key, v in (("eps_gg", gg), ("eps_hf_raw", hf), ("eps_hf", np.minimum(hf, 1.0)),
@@ -379,19 +379,30 @@ class CompiledDesign:
         return out
 
 
-def mauchly(sscp: np.ndarray, tr: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def mauchly(sscp: np.ndarray, tr: np.ndarray, n: int, cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Mauchly's sphericity test of orthonormal-contrast SSCP matrices (D × d × d), ``n`` error df.
 
-    W = det(S) / (tr(S)/d)^d; p from Anderson's chi-square approximation with the second-order term,
-    as R's ``stats::mauchly.test``. NaN where the SSCP is singular (n < d).
+    W = det(S) / (tr(S)/d)^d; p from Anderson's chi-square approximation with its second-order term
+    w2 ∝ (2d³ + 6d² + 3·c + 2). The textbook has c = d (``cells=None``). R writes c = the number of
+    response columns of the model — ``stats::mauchly.test`` on the multivariate model of all within cells
+    (``ncol(SSD)``) and car's ``summary.Anova.mlm`` (``nrow(P)``), hence afex's ``sphericity.tests`` —
+    so ``fit`` passes ``cells`` = the number of within cells and p equals R's. The two agree for d = 2
+    (w2 = 0 there) and differ by up to a few per cent for d ≥ 3. NaN where the SSCP is singular (n < d).
+
+    >>> s = np.array([[[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 1.0]]])   # d = 3, e.g. of 16 within cells
+    >>> w, p_r = mauchly(s, np.trace(s, axis1=1, axis2=2), n=5, cells=16)
+    >>> _, p_textbook = mauchly(s, np.trace(s, axis1=1, axis2=2), n=5)
+    >>> round(float(w[0]), 4), round(float(p_r[0]), 4), round(float(p_textbook[0]), 4)
+    (0.5426, 0.8176, 0.8157)
     """
     d = sscp.shape[-1]
+    c = d if cells is None else cells
     sign, logdet = np.linalg.slogdet(sscp)
     logw = np.where(sign > 0, logdet - d * np.log(tr / d), np.nan)
     if n < d:
         logw = np.full_like(logw, np.nan)
     rho = 1 - (2 * d * d + d + 2) / (6 * d * n)
-    w2 = (d + 2) * (d - 1) * (d - 2) * (2 * d**3 + 6 * d * d + 3 * d + 2) / (288 * (n * d * rho) ** 2)
+    w2 = (d + 2) * (d - 1) * (d - 2) * (2 * d**3 + 6 * d * d + 3 * c + 2) / (288 * (n * d * rho) ** 2)
     z = -n * rho * logw
     f = d * (d + 1) / 2 - 1
     pr1 = special.chdtrc(f, z)

@@ -18,6 +18,8 @@ from analysis.anova import anova
 FIXTURES = Path(__file__).parent / "fixtures" / "anova"
 NAMES = ["exp1", "exp2", "obk", "onewithin", "between2", "mixed11"]
 RTOL = 1e-8
+MAUCHLY_RTOL = 1e-10         # the issue's bar for the ANOVA vs afex; measured ≤ 3e-13
+MAUCHLY_STATS_RTOL = 1e-10   # stats::mauchly.test vs car differ by up to 2.7e-11 among themselves (obk)
 
 
 def as_list(v) -> list[str]:
@@ -80,18 +82,46 @@ def test_sphericity(case):
         assert_close(row["p_gg"], e["p_gg"], f"{name} p_gg")
         assert_close(row["eps_hf"], min(1.0, e["eps_hf_raw"]), f"{name} eps_hf (capped at 1)")
         assert_close(row["p_hf"], e["p_hf"], f"{name} p_hf")
-        assert_close(row["mauchly_w"], e["mauchly_w"], f"{name} Mauchly W (car)")
+        assert_close(row["mauchly_w"], e["mauchly_w"], f"{name} Mauchly W (car)", rtol=MAUCHLY_RTOL)
+        assert_close(row["mauchly_p"], e["mauchly_p"], f"{name} Mauchly p (car)", rtol=MAUCHLY_RTOL)
+        # stats::mauchly.test on afex's mlm takes another numerical path (solve, det) to the same numbers
+        assert_close(row["mauchly_w"], e["mauchly_w_stats"], f"{name} Mauchly W (stats)", rtol=MAUCHLY_STATS_RTOL)
+        assert_close(row["mauchly_p"], e["mauchly_p_stats"], f"{name} Mauchly p (stats)", rtol=MAUCHLY_STATS_RTOL)
         assert_close(row["mauchly_w"], e["mauchly_w_textbook"], f"{name} Mauchly W")
-        assert_close(row["mauchly_p"], e["mauchly_p"], f"{name} Mauchly p")
-        # car's second-order term uses the number of within cells where the textbook formula has d: the two p
-        # values agree exactly for d = 2 and closely otherwise
-        d = round(row["df2"] / table.strata.loc["Error", "df"])
-        if d == 2:
-            assert_close(row["mauchly_p"], e["mauchly_p_car"], f"{name} Mauchly p (car, d = 2)")
-        else:
-            assert row["mauchly_p"] == pytest.approx(e["mauchly_p_car"], rel=0.05, abs=1e-6)
     if fx["design"]["name"] in ("exp1", "exp2", "obk", "onewithin", "mixed11"):
         assert n_checked > 0
+
+
+def test_mauchly_textbook_form_differs_from_r_only_for_three_or_more_contrasts():
+    """R (stats and car) writes the number of within cells where the textbook second-order term has d:
+    ``mauchly(..., cells=None)`` is the textbook p, equal to R's for d = 2 and within a few per cent beyond."""
+    from analysis.anova_core import mauchly
+
+    seen_d = set()
+    for name in NAMES:
+        fx, table = load(name)
+        for e in r_effects(fx):
+            if e.get("mauchly_p_textbook") is None:
+                continue
+            within = [f for f in as_list(e["factors"]) if f in table.within]
+            # residual SSCP of the effect's contrasts, from the engine's own transform
+            comp = table.design.compile()
+            _, T = comp.block_ss(table.Y[None])
+            mask = sum(1 << table.within.index(f) for f in within)
+            cols = comp.col_slices[comp.strata_masks.index(mask)]
+            E = T[0, comp.res_slice, cols]
+            sscp = (E.T @ E)[None]
+            d = sscp.shape[-1]
+            seen_d.add(d)
+            _, p_text = mauchly(sscp, np.trace(sscp, axis1=1, axis2=2), comp.df_error)
+            _, p_r = mauchly(sscp, np.trace(sscp, axis1=1, axis2=2), comp.df_error, cells=table.design.n_cells)
+            assert_close(float(p_text[0]), e["mauchly_p_textbook"], f"{name} {e['effect']} textbook p", MAUCHLY_RTOL)
+            assert_close(float(p_r[0]), e["mauchly_p"], f"{name} {e['effect']} R p", MAUCHLY_RTOL)
+            if d == 2:
+                assert_close(float(p_text[0]), float(p_r[0]), "d = 2: no second-order difference", 1e-14)
+            else:   # a real difference, and a small one
+                assert 1e-6 < abs(p_text[0] - p_r[0]) / p_r[0] < 0.05
+    assert {2, 3} <= seen_d
 
 
 def test_error_strata(case):
