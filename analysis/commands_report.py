@@ -196,6 +196,9 @@ def run_analyze(args) -> int:
     print(f"{imp['rows']} rows: {imp['imported_rows']} imported, {imp['excluded_rows']} excluded "
           f"({', '.join(f'{k}: {v}' for k, v in imp['excluded_by_reason'].items()) or 'none'}); "
           f"{imp['participants']} participants")
+    if imp.get("excluded_answers"):
+        print(f"answers excluded one by one (the rest of their row imported): {imp['excluded_answers']} "
+              f"({', '.join(f'{k}: {v}' for k, v in imp['answers_excluded_by_reason'].items())}) (see exclusions.csv)")
     if imp["columns_not_imported"]:
         print(f"columns not imported: {', '.join(imp['columns_not_imported'])} (see exclusions.csv)")
     if imp.get("files_not_read"):

@@ -1,6 +1,8 @@
-"""Write output files atomically: a temporary name in the same folder, renamed at the end.
+"""Write output files atomically (a temporary name in the same folder, renamed at the end); read input files
+only when they are regular files of a bounded size.
 
-A failure (or Ctrl-C) never leaves a half-written response file or report behind.
+A failure (or Ctrl-C) never leaves a half-written response file or report behind, and an input that is a
+device (``/dev/zero``), a FIFO or a socket is refused before it is opened (reading one never ends).
 
 >>> import tempfile, pathlib
 >>> p = pathlib.Path(tempfile.mkdtemp()) / "x.csv"
@@ -12,10 +14,60 @@ from __future__ import annotations
 
 import os
 import shutil
+import stat
 import tempfile
 from pathlib import Path
 
 from analysis.errors import AnalysisError
+
+# Largest input file read (bytes): a response export of 1,000 respondents × 500 questions, or a jsPsych file of
+# 100,000 trials, is well under it; the text, its parsed cells and the tables built from it need ~20× in memory.
+MAX_INPUT_BYTES = 256 * 1024 * 1024
+
+_NOT_REGULAR = ((stat.S_ISFIFO, "a FIFO, a named pipe"), (stat.S_ISCHR, "a character device"),
+                (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def read_input_bytes(path: str | Path, what: str = "input file") -> bytes:
+    """The bytes of ``path``, refusing (before opening it) anything but a regular file of at most
+    :data:`MAX_INPUT_BYTES` bytes; ``what`` names the file in messages.
+
+    Opening a FIFO blocks until a writer comes and ``/dev/zero`` never ends, so the kind of file is checked
+    first; the read itself stops one byte past the limit, as a file may grow after it was checked.
+
+    >>> read_input_bytes("/dev/zero", "response file")   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    analysis.errors.AnalysisError: /dev/zero: not a regular file (a character device); expected a response file ...
+    """
+    path = Path(path)
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        raise AnalysisError(f"{path}: {what} not found") from None
+    except OSError as exc:
+        raise AnalysisError(f"{path}: cannot be read ({exc.strerror})") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise AnalysisError(f"{path}: is a directory; expected one {what}")
+    if not stat.S_ISREG(info.st_mode):
+        kind = next((name for test, name in _NOT_REGULAR if test(info.st_mode)), "not a plain file")
+        raise AnalysisError(f"{path}: not a regular file ({kind}); expected a {what} saved as a file")
+    limit = MAX_INPUT_BYTES
+    if info.st_size > limit:
+        raise AnalysisError(_too_large(path, info.st_size, limit, what))
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(limit + 1)
+    except OSError as exc:
+        raise AnalysisError(f"{path}: cannot be read ({exc.strerror})") from None
+    if len(data) > limit:
+        raise AnalysisError(_too_large(path, len(data), limit, what, grew=True))
+    return data
+
+
+def _too_large(path: Path, size: int, limit: int, what: str, grew: bool = False) -> str:
+    size_text = f"grew past {limit:,} bytes while it was read" if grew else f"is {size:,} bytes"
+    return (f"{path}: {size_text}, over the limit of {limit:,} bytes for a {what}; split it into several "
+            f"files (a folder of response files is read as one data set)")
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

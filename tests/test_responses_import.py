@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -96,15 +97,21 @@ def test_afc_left_right_choice_text_maps_to_the_chosen_method(afc):
 def test_corrupted_export_lists_every_row_with_its_reason(likert):
     result = import_responses(DATA / "qualtrics_corrupt.csv", likert)
     assert result.n_rows == 8 and result.reconciles
-    rows = result.exclusions.dropna(subset=["row"])
+    rows = result.excluded_rows
     assert dict(zip(rows["row"], rows["reason"])) == {
-        5: "duplicate participant id", 6: "answer outside the scale", 7: "missing cells",
+        5: "duplicate participant id", 7: "missing cells",
         8: "survey preview or test", 9: "malformed row", 10: "several between-subject groups"}
-    assert sorted(result.data["participant"].unique()) == ["p01", "p09"]
+    # p04's one answer outside the scale excludes that answer, not p04 (it used to exclude the whole row)
+    answers = result.excluded_answers
+    assert answers[["row", "participant", "reason", "column"]].values.tolist() == [
+        [6, "p04", "answer outside the scale", "F-walk-Lo1_r2"]]
+    assert "'7' is outside 1…5" in answers["detail"].iloc[0]
+    assert sorted(result.data["participant"].unique()) == ["p01", "p04", "p09"]
+    assert len(result.data[result.data["participant"] == "p04"]) == 8     # 9 answers, one excluded
     columns = result.exclusions[result.exclusions["row"].isna()]
     assert columns[["reason", "column"]].values.tolist() == [["unknown export tag", "Q99"]]
-    assert "'7' is outside 1…5" in rows.set_index("row").loc[6, "detail"]
-    assert "1 of 4 design cells" in rows.set_index("row").loc[7, "detail"]
+    missing = rows.set_index("row").loc[7]
+    assert "1 of 4 design cells" in missing["detail"] and missing["column"] == "F-jog-Lo1_r1, F-jog-Lo1_r2"
 
 
 def test_jspsych_csv_unfinished_participant_and_non_trial_rows(likert):
@@ -168,7 +175,8 @@ def test_cli_inspect_and_bad_file_exit_code(run_cli):
     assert code == 0 and '"responses": 11' in out
     code, out, _ = run_cli("responses", "inspect", str(DATA / "qualtrics_corrupt.csv"), "--design",
                            str(DATA / "mini_likert"))
-    assert code == 0 and "2 rows imported, 6 excluded" in out and "columns not imported: Q99" in out
+    assert code == 0 and "3 rows imported, 5 excluded" in out and "columns not imported: Q99" in out
+    assert "answers excluded one by one (the rest of their row imported): 1 (answer outside the scale: 1)" in out
     code, _, err = run_cli("responses", "inspect", str(DATA / "bad_binary.xlsx"))
     assert code == 2 and "not a text file" in err and "Traceback" not in err
 

@@ -10,6 +10,11 @@ The tidy table has one row per answer: ``participant``, the factor columns, ``st
 ``repetition``, ``trial`` (presentation order when known), the score (``rating`` for Likert;
 ``chosen`` and ``position`` for k-AFC; ``ranking`` = levels best first, ``a>b>c``, for rankings),
 ``rt`` (seconds, when known), ``practice`` and ``row`` (the record number in the file).
+
+The exclusions table has one row per excluded row (``scope`` "row": a Qualtrics respondent, a jsPsych or
+long-format answer), per answer excluded from a row that is otherwise imported (``scope`` "answer": one bad
+cell of a Qualtrics export), per column not imported (``scope`` "column") and per file of a folder not read
+(``scope`` "file"). Rows reconcile: ``rows = imported rows + excluded rows``.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import pandas as pd
 
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
-from analysis.responses.answers import TagIndex
+from analysis.responses.answers import ANSWER, FILE, ROW, TagIndex
 from analysis.responses.qualtrics import qualtrics_answers
 from analysis.responses.read import RawFile, folder_entries, read_response_file, response_files
 from analysis.responses.tidy import assemble
@@ -48,21 +53,37 @@ class ImportResult:
         return len(_row_keys(self.data))
 
     @property
+    def excluded_rows(self) -> pd.DataFrame:
+        """The exclusions of whole rows (not of single answers, columns or files)."""
+        return self.exclusions[self.exclusions["scope"] == ROW].dropna(subset=["row"])
+
+    @property
+    def excluded_answers(self) -> pd.DataFrame:
+        """The answers excluded one by one (Qualtrics: a bad cell), the rest of their row imported."""
+        return self.exclusions[self.exclusions["scope"] == ANSWER]
+
+    @property
     def n_excluded_rows(self) -> int:
-        return len(_row_keys(self.exclusions.dropna(subset=["row"])))
+        return len(_row_keys(self.excluded_rows))
 
     @property
     def reconciles(self) -> bool:
-        return self.n_rows == self.n_imported_rows + self.n_excluded_rows
+        """Every row of the file is imported or excluded, never both, and every answer excluded on its own
+        belongs to a row of the file."""
+        imported, excluded = _row_keys(self.data), _row_keys(self.excluded_rows)
+        return (self.n_rows == len(imported) + len(excluded) and not imported & excluded
+                and _row_keys(self.excluded_answers) <= imported | excluded)
 
     def summary(self) -> dict:
-        """Counts for reports: rows, imported, excluded by reason, participants kept."""
-        rows = self.exclusions.dropna(subset=["row"])
+        """Counts for reports: rows, imported, excluded by reason, answers excluded one by one, participants."""
+        rows, answers = self.excluded_rows, self.excluded_answers
         return {"file": str(self.path), "format": self.format, "rows": self.n_rows,
                 "imported_rows": self.n_imported_rows, "excluded_rows": self.n_excluded_rows,
                 "participants": int(self.data["participant"].nunique()),
                 "answers": int((~self.data["practice"]).sum()),
-                "excluded_by_reason": {str(k): int(v) for k, v in rows["reason"].value_counts().sort_index().items()},
+                "excluded_by_reason": _counts(rows["reason"]),
+                "excluded_answers": len(answers),
+                "answers_excluded_by_reason": _counts(answers["reason"]),
                 "columns_not_imported": self.exclusions.loc[self.exclusions["row"].isna()
                                                             & (self.exclusions["reason"] != FILE_NOT_READ),
                                                             "column"].tolist(),
@@ -70,6 +91,10 @@ class ImportResult:
                                    self.exclusions.loc[self.exclusions["reason"] == FILE_NOT_READ,
                                                        ["file", "detail"]].itertuples(index=False)]
                 if "file" in self.exclusions else []}
+
+
+def _counts(reasons: pd.Series) -> dict:
+    return {str(k): int(v) for k, v in reasons.value_counts().sort_index().items()}
 
 
 def _row_keys(frame: pd.DataFrame) -> set:
@@ -88,11 +113,12 @@ def import_responses(path: str | Path, design: DesignInfo) -> ImportResult:
     tags = _tag_index(design)
     try:   # the readers and checks name row and column; the file is known here
         if raw.format.startswith("qualtrics"):
-            answers, exclusions = qualtrics_answers(raw, tags, design.between, design.response_type == "ranking")
+            answers, exclusions, columns = qualtrics_answers(raw, tags, design.between,
+                                                             design.response_type == "ranking")
         else:
-            answers, exclusions = trialwise_answers(raw, design.between, design.within)
+            (answers, exclusions), columns = trialwise_answers(raw, design.between, design.within), None
         data, excluded = assemble(answers, exclusions, raw.row_numbers, design,
-                                  trialwise=not raw.format.startswith("qualtrics"))
+                                  trialwise=not raw.format.startswith("qualtrics"), stimulus_columns=columns)
     except AnalysisError as exc:
         raise AnalysisError(f"{path}: {exc}") from None
     return ImportResult(Path(path), raw.format, data, excluded, raw.n_rows)
@@ -147,11 +173,11 @@ def import_folder(folder: Path, design: DesignInfo) -> ImportResult:
     extra = pd.DataFrame({"row": moved["row"], "participant": moved["participant"],
                           "reason": "duplicate participant id",
                           "detail": [f"{p!r} already imported from {owner[p]}" for p in moved["participant"]],
-                          "column": "", "file": moved["file"]})
+                          "column": "", "scope": ROW, "file": moved["file"]})
     # what the folder holds besides the response files: listed, as nothing is dropped silently
     skipped = pd.DataFrame([{"row": None, "participant": "", "reason": FILE_NOT_READ, "detail": s["reason"],
-                             "column": "", "file": s["name"]} for s in folder_entries(folder)[1]],
-                           columns=["row", "participant", "reason", "detail", "column", "file"])
+                             "column": "", "scope": FILE, "file": s["name"]} for s in folder_entries(folder)[1]],
+                           columns=["row", "participant", "reason", "detail", "column", "scope", "file"])
     exclusions = pd.concat([exclusions, extra, skipped], ignore_index=True).astype({"row": "Int64"})
     formats = "+".join(sorted({r.format for r in results}))
     return ImportResult(folder, formats, data[~later].reset_index(drop=True), exclusions,

@@ -1,4 +1,5 @@
-"""The records every reader produces: one :class:`Answer` per question answered, one :class:`Exclusion` per row left out.
+"""The records every reader produces: one :class:`Answer` per question answered, one :class:`Exclusion` per row
+(or, in a Qualtrics export, answer) left out.
 
 Readers turn their format into these; :mod:`analysis.responses.tidy` scores and checks them the same way
 whatever the source, so every format gets the same exclusion rules.
@@ -33,15 +34,23 @@ class Answer:
     restated: dict[str, str] = field(default_factory=dict)  # the file's own restatement of the score (checked)
 
 
+# What an exclusion leaves out (the ``scope`` column of exclusions.csv).
+ROW = "row"          # the whole record of the file (a Qualtrics respondent; one jsPsych/long answer)
+ANSWER = "answer"    # one answer (cell) of a record whose other answers are imported (Qualtrics)
+COLUMN = "column"    # a column that is not imported (``row`` empty)
+FILE = "file"        # a file of a folder that is not read (``row`` empty)
+
+
 @dataclass
 class Exclusion:
-    """A row (or, with ``row`` None, a column) that is not imported, and why."""
+    """A row, an answer of a row (``scope`` ANSWER) or, with ``row`` None, a column that is not imported, and why."""
 
     row: int | None
     participant: str
     reason: str
     detail: str = ""
     column: str = ""
+    scope: str = ROW
 
 
 def _key(text: str) -> str:

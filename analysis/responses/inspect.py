@@ -1,5 +1,8 @@
 """``shapemotion responses inspect``: what a response file is, before any design is involved.
 
+A file whose header names a column twice is described (``repeated_columns``), not refused: inspecting is how
+one finds out what is wrong with it; the import refuses it.
+
 >>> import tempfile, pathlib
 >>> p = pathlib.Path(tempfile.mkdtemp()) / "long.csv"
 >>> _ = p.write_text("participant,stimulus_id,response\\n1,s1,3\\n2,s1,4\\n")
@@ -49,8 +52,10 @@ def inspect_folder(folder: Path) -> dict:
 
 def _inspect_one(path: Path) -> tuple[dict, set]:
     """:func:`inspect_file` of one file, and its participants (ids, or the file's rows where ids are unknown)."""
-    raw = read_response_file(path)
+    raw = read_response_file(path, refuse_repeated=False)
     info = {"file": str(path), "format": raw.format, "rows": raw.n_rows}
+    if raw.repeated:
+        info["repeated_columns"] = raw.repeated
     if raw.format.startswith("qualtrics"):
         cols = classify_columns(raw, tags=None)
         kinds = {i: "metadata" for i in cols.metadata} | {i: "display order" for i in cols.display_order}
@@ -90,6 +95,11 @@ def describe_text(info: dict) -> str:
         lines.append("total:")
     lines += [f"format: {info['format']}", f"rows: {info['rows']}", f"responses: {info['responses']}",
               f"participants: {info['participants']}"]
+    repeated = info.get("repeated_columns") or [f"{f['file']}: {r}" for f in info.get("files", [])
+                                                for r in f.get("repeated_columns", [])]
+    if repeated:
+        lines.append("repeated column names (the import refuses this file):")
+        lines += [f"  {r}" for r in repeated]
     if "unfinished" in info:
         lines.append(f"unfinished (Finished = 0): {info['unfinished']}")
     lines.append("columns:")
@@ -103,6 +113,10 @@ def describe_text(info: dict) -> str:
         reasons = ", ".join(f"{k}: {v}" for k, v in imp["excluded_by_reason"].items()) or "none"
         lines += [f"import against the design: {imp['imported_rows']} rows imported, {imp['excluded_rows']} excluded "
                   f"({reasons}); {imp['participants']} participants, {imp['answers']} test answers"]
+        if imp.get("excluded_answers"):
+            answers = ", ".join(f"{k}: {v}" for k, v in imp["answers_excluded_by_reason"].items())
+            lines.append(f"answers excluded one by one (the rest of their row imported): {imp['excluded_answers']} "
+                         f"({answers})")
         if imp["columns_not_imported"]:
             lines.append(f"columns not imported: {', '.join(imp['columns_not_imported'])}")
     return "\n".join(lines)

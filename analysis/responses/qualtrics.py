@@ -4,7 +4,11 @@ One data row is one respondent. Columns are classified as metadata (StartDate �
 display-order ``*_DO`` columns (they give each participant's presentation order), timing columns,
 questions (their export tag names a stimulus, optionally with a repetition suffix; rank-order questions
 add ``_1`` … ``_k`` per screen position) and embedded data (anything else, e.g. ``PROLIFIC_PID``).
-A question whose tag names no stimulus is listed as a column exclusion.
+A question whose tag names no stimulus is listed as a column exclusion; two columns whose tags name the same
+stimulus and repetition (``F-walk-Hi1_r1`` and ``f_walk_hi1_r1``) are refused, as one would replace the other.
+
+One bad cell excludes that answer, not the respondent (``scope`` ``answer`` in the exclusions): the row's
+other answers are imported unless the respondent then lacks a design cell (see :mod:`analysis.responses.tidy`).
 
 A forced-choice value is an answer option of the survey (``scoring.CHOICE``): a number is the option's 1-based
 screen position (the numeric export's recode), text the option's label (a position label, ``Left``/``Right``) —
@@ -77,9 +81,37 @@ def _match_tag(name: str, tags: TagIndex, ranking: bool) -> tuple[str, int | Non
     return (hit[0], hit[1], None) if hit else None
 
 
+def check_one_column_per_answer(raw: RawFile, cols: QualtricsColumns) -> None:
+    """Refuse two question columns that state the same stimulus and repetition (and rank position): the
+    answers of one would silently stand for the other's."""
+    first: dict[tuple, int] = {}
+    for i, (sid, rep, pos) in cols.questions.items():
+        if rep is None and pos is None:
+            continue   # unnumbered showings of one stimulus are numbered in presentation order
+        other = first.setdefault((sid, rep, pos), i)
+        if other != i:
+            what = f"repetition {rep} of stimulus {sid!r}" if rep is not None else f"stimulus {sid!r}"
+            where = f" at rank position {pos}" if pos is not None else ""
+            raise AnalysisError(f"columns {other + 1} and {i + 1} ({raw.columns[other]!r} and {raw.columns[i]!r}) "
+                                f"both answer {what}{where} (their tags differ only in case or punctuation); "
+                                f"rename or remove one of them")
+
+
+def stimulus_columns(raw: RawFile, cols: QualtricsColumns) -> dict[str, list[str]]:
+    """Stimulus id → the question columns that answer it (rank-order columns by their question's tag), so that
+    an exclusion for a missing design cell can name where its answers would be."""
+    out: dict[str, list[str]] = {}
+    for i, (sid, _, pos) in cols.questions.items():
+        name = raw.columns[i].rsplit("_", 1)[0] if pos is not None else raw.columns[i]
+        if name not in out.setdefault(sid, []):
+            out[sid].append(name)
+    return out
+
+
 def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking: bool = False):
-    """Answers and row exclusions of a Qualtrics export (one row per respondent)."""
+    """Answers, row exclusions and :func:`stimulus_columns` of a Qualtrics export (one row per respondent)."""
     cols = classify_columns(raw, tags, ranking)
+    check_one_column_per_answer(raw, cols)
     exclusions = [Exclusion(None, "", "unknown export tag",
                             f"question {raw.columns[i]!r} ({_text(raw, i)}) names no stimulus of the design; "
                             f"column not imported", raw.columns[i]) for i in cols.unknown]
@@ -102,7 +134,7 @@ def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking:
         seen[pid] = row
         groups = {n: record[i].strip() for n, i in group_cols.items() if i is not None and record[i].strip()}
         answers += _row_answers(raw, record, row, pid, cols, groups, reading)
-    return answers, exclusions
+    return answers, exclusions, stimulus_columns(raw, cols)
 
 
 def _choice_text(raw: RawFile, finished: int | None, status: int | None) -> bool:

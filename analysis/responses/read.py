@@ -1,6 +1,8 @@
 """Read a response file and tell which kind it is: Qualtrics (3-row or legacy 2-row), jsPsych CSV/JSON, long CSV.
 
-Reading never guesses silently: a file that is binary, not UTF-8, empty or without a recognisable header
+Reading never guesses silently: a file that is binary, not UTF-8, empty or without a recognisable header,
+that is no regular file (a FIFO, ``/dev/zero``) or is over the size limit (``io_files.MAX_INPUT_BYTES``), or
+whose header names a column twice (a merge or a hand edit: one column's answers would replace the other's)
 raises :class:`~analysis.errors.AnalysisError` naming the file and what was expected.
 
 >>> import tempfile, pathlib
@@ -21,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from analysis.errors import AnalysisError
+from analysis.io_files import read_input_bytes
 
 # Columns Qualtrics writes before the questions (current names and the legacy V1…V10 names).
 QUALTRICS_METADATA = {
@@ -51,6 +54,7 @@ class RawFile:
     import_ids: list[dict] = field(default_factory=list)
     rows: list[list[str]] | list[dict] = field(default_factory=list)
     row_numbers: list[int] = field(default_factory=list)
+    repeated: list[str] = field(default_factory=list)   # columns (JSON: keys) named twice, as messages
 
     @property
     def n_rows(self) -> int:
@@ -100,25 +104,56 @@ def response_files(folder: Path) -> list[Path]:
     return files
 
 
-def read_response_file(path: str | Path) -> RawFile:
-    """Detect the format of ``path`` and split it into header and records."""
+def read_response_file(path: str | Path, refuse_repeated: bool = True) -> RawFile:
+    """Detect the format of ``path`` and split it into header and records.
+
+    A column named twice is refused (``refuse_repeated``); ``responses inspect`` reads such a file to describe
+    it and lists ``RawFile.repeated`` instead.
+    """
     path = Path(path)
     text = _decode(path)
     stripped = text.lstrip()
     if not stripped:
         raise AnalysisError(f"{path}: the file is empty (expected a response export with a header row)")
-    if stripped[0] in "[{":
-        return _read_json(path, stripped)
-    return _read_csv(path, text)
+    raw = _read_json(path, stripped) if stripped[0] in "[{" else _read_csv(path, text)
+    if refuse_repeated and raw.repeated:
+        raise AnalysisError(f"{path}: {'; '.join(raw.repeated)}; a column named twice would have one column's "
+                            f"answers replace the other's (a merge or a hand edit?): rename or remove one of them")
+    return raw
+
+
+def repeated_columns(columns: list[str]) -> list[str]:
+    """Messages for the names that several columns share (1-based positions, as a spreadsheet counts), and for
+    participant columns that differ only in case (the importer finds those case-insensitively).
+
+    >>> repeated_columns(["participant", "Q3_1", "rt", "Q3_1", "PARTICIPANT"])
+    ["columns 2 and 4 are both named 'Q3_1'", "columns 1 and 5 ('participant' and 'PARTICIPANT') both name the participant"]
+    """
+    positions: dict[str, list[int]] = {}
+    for i, name in enumerate(columns, 1):
+        if name:   # a blank header names nothing the importer reads
+            positions.setdefault(name, []).append(i)
+    out = [f"columns {_and(where)} are {'both' if len(where) == 2 else 'all'} named {name!r}"
+           for name, where in positions.items() if len(where) > 1]
+    wanted = {c.lower() for c in PARTICIPANT_COLUMNS}
+    by_case: dict[str, list[str]] = {}
+    for name in positions:
+        if name.lower() in wanted:
+            by_case.setdefault(name.lower(), []).append(name)
+    for names in by_case.values():
+        if len(names) > 1:
+            where = [positions[n][0] for n in names]
+            out.append(f"columns {_and(where)} ({_and([repr(n) for n in names])}) both name the participant")
+    return out
+
+
+def _and(items: list) -> str:
+    items = [str(i) for i in items]
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
 
 
 def _decode(path: Path) -> str:
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise AnalysisError(f"{path}: response file not found") from None
-    except IsADirectoryError:
-        raise AnalysisError(f"{path}: is a directory; expected one response file") from None
+    data = read_input_bytes(path, "response file")
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise AnalysisError(f"{path}: the file is UTF-16 (Qualtrics' TSV export?); export the responses as CSV "
                             f"(UTF-8) instead")
@@ -132,11 +167,37 @@ def _decode(path: Path) -> str:
                             f"re-export the responses as UTF-8 CSV") from None
 
 
+class _Object(dict):
+    """A JSON object that remembers the keys it holds twice (``json.loads`` keeps the last value silently)."""
+
+    repeated: list[str] = []
+
+
+def _object(pairs: list[tuple]) -> dict:
+    obj = _Object(pairs)
+    if len(obj) < len(pairs):
+        keys = [k for k, _ in pairs]
+        obj.repeated = list(dict.fromkeys(k for k in keys if keys.count(k) > 1))
+    return obj
+
+
+def _repeated_keys(trial, number: int) -> list[str]:
+    """Messages for the keys a trial object (or an object inside it, e.g. a survey ``response``) holds twice."""
+    out = [f"trial {number} has the key {key!r} twice" for key in getattr(trial, "repeated", [])]
+    values = trial.values() if isinstance(trial, dict) else trial if isinstance(trial, list) else []
+    for value in values:
+        if isinstance(value, (dict, list)):
+            out += _repeated_keys(value, number)
+    return out
+
+
 def _read_json(path: Path, text: str) -> RawFile:
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_object)
     except json.JSONDecodeError as exc:
         raise AnalysisError(f"{path}: line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise AnalysisError(f"{path}: JSON nested too deeply to be jsPsych data") from None
     if isinstance(data, dict):  # jsPsych's {"trials": [...]} or a single trial object
         data = data.get("trials", [data])
     if not isinstance(data, list) or not all(isinstance(x, dict) for x in data):
@@ -149,7 +210,9 @@ def _read_json(path: Path, text: str) -> RawFile:
         raise AnalysisError(f"{path}: not a jsPsych export: no trial has {sorted(JSPSYCH_MARKERS)} or stimulus_id "
                             f"(found keys {keys})")
     columns = list(dict.fromkeys(k for trial in data for k in trial))
-    return RawFile(path, "jspsych-json", columns, rows=data, row_numbers=list(range(1, len(data) + 1)))
+    repeated = [m for number, trial in enumerate(data, 1) for m in _repeated_keys(trial, number)]
+    return RawFile(path, "jspsych-json", columns, rows=data, row_numbers=list(range(1, len(data) + 1)),
+                   repeated=repeated)
 
 
 def _read_csv(path: Path, text: str) -> RawFile:
@@ -160,13 +223,16 @@ def _read_csv(path: Path, text: str) -> RawFile:
     header = [c.strip() for c in records[0]]
     names = set(header)
     if _is_qualtrics(header):
-        return _qualtrics(path, header, records)
+        raw = _qualtrics(path, header, records)
+        raw.repeated = repeated_columns(raw.columns)
+        return raw
     data = records[1:]
     numbers = list(range(2, len(records) + 1))
+    repeated = repeated_columns(header)
     if names & JSPSYCH_MARKERS and ("response" in names or "button_pressed" in names):
-        return RawFile(path, "jspsych-csv", header, rows=data, row_numbers=numbers)
+        return RawFile(path, "jspsych-csv", header, rows=data, row_numbers=numbers, repeated=repeated)
     if {"stimulus_id", "response"} <= names and _participant_column(header):
-        return RawFile(path, "long", header, rows=data, row_numbers=numbers)
+        return RawFile(path, "long", header, rows=data, row_numbers=numbers, repeated=repeated)
     raise AnalysisError(
         f"{path}: no recognisable header row; expected a Qualtrics export (ResponseId, Finished, … then the "
         f"questions' export tags), jsPsych data (trial_type, response, stimulus_id, …) or a long CSV with "

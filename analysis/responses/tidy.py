@@ -4,10 +4,16 @@ Rules, in order (each excluded row is listed once, with the first reason that ap
 1. the reader's own (malformed row, unfinished, preview/test, not a stimulus trial, duplicate participant id);
 2. answers to stimuli the design does not know (long formats: that row);
 3. duplicate answers (same participant, stimulus and repetition) and repetitions outside the design's 1…n;
-4. answers outside the response scale (the whole row: in a Qualtrics export that is the participant);
+4. answers outside the response scale;
 5. participants whose answers span several between-subject groups;
 6. participants with missing cells (a design cell without any valid answer): all their rows.
-Rows with no answer at all are listed as "no answers". ``imported rows + excluded rows = rows in the file``.
+Rules 2–4 are faults of one answer: in a one-answer-per-row format (jsPsych, long) that row is excluded; in a
+Qualtrics export (one respondent per row) only that answer is (``scope`` "answer"), the respondent's other
+answers are imported — unless rule 6 then applies. A Qualtrics column whose tag states a repetition the design
+lacks is a fault of the column, not of its answers: it is listed once and not imported (like a tag that names no
+stimulus). Rows with no answer at all are listed as "no answers",
+rows whose every answer was excluded one by one as "no valid answers".
+``imported rows + excluded rows = rows in the file``; in an imported row, each answer is imported or listed.
 A factor level a row states that contradicts its stimulus's level in conditions.csv is an error, not an
 exclusion: the file and the design disagree about what was shown.
 """
@@ -20,51 +26,84 @@ import pandas as pd
 
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
-from analysis.responses.answers import Answer, Exclusion
+from analysis.responses.answers import ANSWER, COLUMN, ROW, Answer, Exclusion
 from analysis.responses.scoring import OutsideScale, score_choice, score_likert, score_ranking
 
-EXCLUSION_COLUMNS = ["row", "participant", "reason", "detail", "column"]
+EXCLUSION_COLUMNS = ["row", "participant", "reason", "detail", "column", "scope"]
 
 
 def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int], design: DesignInfo,
-             trialwise: bool) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(tidy table, exclusions table) from a reader's answers and exclusions."""
+             trialwise: bool, stimulus_columns: dict[str, list[str]] | None = None
+             ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(tidy table, exclusions table) from a reader's answers and exclusions.
+
+    ``trialwise``: one answer per row (jsPsych, long), so a fault of the answer excludes its row; otherwise
+    (Qualtrics) it excludes that answer alone. ``stimulus_columns`` (stimulus id → the columns answering it)
+    lets a missing-cell exclusion name the columns where the cell's answers would be.
+    """
     excluded: dict[int, Exclusion] = {e.row: e for e in exclusions if e.row is not None}
     column_notes = [e for e in exclusions if e.row is None]
+    answer_drops: dict[int, tuple[Answer, Exclusion]] = {}   # id(answer) → (answer, why it alone is left out)
     stimuli = design.stimulus_table()
 
-    def drop(answer: Answer, reason: str, detail: str) -> None:
-        excluded.setdefault(answer.row, Exclusion(answer.row, answer.participant, reason, detail, answer.column))
+    def drop(answer: Answer, reason: str, detail: str, column: str | None = None) -> None:
+        """Exclude the answer's whole row (in a Qualtrics export: the respondent)."""
+        excluded.setdefault(answer.row, Exclusion(answer.row, answer.participant, reason, detail,
+                                                  answer.column if column is None else column))
+
+    def drop_answer(answer: Answer, reason: str, detail: str) -> None:
+        """Exclude one answer: its row where the row is that answer, else the answer alone."""
+        if trialwise:
+            drop(answer, reason, detail)
+        else:
+            answer_drops.setdefault(id(answer), (answer, Exclusion(answer.row, answer.participant, reason, detail,
+                                                                   answer.column, ANSWER)))
+
+    def live(pairs: list) -> list:
+        return [(a, s) for a, s in pairs if a.row not in excluded and id(a) not in answer_drops]
 
     kept = []
     for a in answers:
         if a.stimulus_id not in stimuli.index:
-            drop(a, "unknown stimulus", f"stimulus_id {a.stimulus_id!r} is not in conditions.csv")
+            drop_answer(a, "unknown stimulus", f"stimulus_id {a.stimulus_id!r} is not in conditions.csv")
         else:
             kept.append(a)
     check_declared_levels(kept, stimuli)
     kept = _number_repetitions(kept, trialwise)
-    kept = _drop_duplicates(kept, drop, design.repetitions, stimuli)
+    if not trialwise:
+        kept, notes = _columns_outside(kept, design.repetitions, stimuli)
+        column_notes += notes
+    kept = _drop_duplicates(kept, drop_answer, design.repetitions, stimuli)
     scored = []
     for a in kept:
         try:
             scored.append((a, _score(a, design)))
         except OutsideScale as exc:
-            drop(a, "answer outside the scale", str(exc))
-    scored = [(a, s) for a, s in scored if a.row not in excluded]
-    scored = _check_groups(scored, design, stimuli, drop)
-    scored = [(a, s) for a, s in scored if a.row not in excluded]
-    scored = _check_cells(scored, design, stimuli, drop)
-    scored = [(a, s) for a, s in scored if a.row not in excluded]
+            drop_answer(a, "answer outside the scale", str(exc))
+    scored = live(scored)
+    scored = live(_check_groups(scored, design, stimuli, drop))
+    scored = live(_check_cells(scored, design, stimuli, drop, list(answer_drops.values()), stimulus_columns))
     imported = {a.row for a, _ in scored}
     for row in rows:
         if row not in imported and row not in excluded:
-            excluded[row] = Exclusion(row, "", "no answers", "the row answers no stimulus of the design")
+            excluded[row] = _unanswered(row, [e for a, e in answer_drops.values() if a.row == row])
     table = _table(scored, design, stimuli)
-    listed = sorted(excluded.values(), key=lambda e: e.row) + column_notes
-    frame = pd.DataFrame([[e.row, e.participant, e.reason, e.detail, e.column] for e in listed],
+    listed = sorted([*excluded.values(), *(e for _, e in answer_drops.values())],
+                    key=lambda e: (e.row, e.scope != ROW)) + column_notes
+    frame = pd.DataFrame([[e.row, e.participant, e.reason, e.detail, e.column,
+                           e.scope if e.row is not None else COLUMN] for e in listed],
                          columns=EXCLUSION_COLUMNS).astype({"row": "Int64"})
     return table, frame
+
+
+def _unanswered(row: int, dropped: list[Exclusion]) -> Exclusion:
+    """The exclusion of a row none of whose answers is imported and which no rule excluded as a whole."""
+    if not dropped:
+        return Exclusion(row, "", "no answers", "the row answers no stimulus of the design")
+    reasons = ", ".join(sorted({e.reason for e in dropped}))
+    return Exclusion(row, dropped[0].participant, "no valid answers",
+                     f"all {len(dropped)} answers of the row are excluded ({reasons}; each is listed with scope "
+                     f"'answer')")
 
 
 def check_declared_levels(answers: list[Answer], stimuli: pd.DataFrame) -> None:
@@ -127,6 +166,20 @@ def _drop_duplicates(answers: list[Answer], drop, repetitions: int, stimuli: pd.
     return out
 
 
+def _columns_outside(answers: list[Answer], repetitions: int, stimuli: pd.DataFrame
+                     ) -> tuple[list[Answer], list[Exclusion]]:
+    """(the answers of the other columns, one note per column) for the columns of a wide export whose tag states
+    a repetition the design does not have: the column does not fit the design, whoever answered it."""
+    outside: dict[str, Answer] = {}
+    for a in answers:
+        if not a.numbered and _outside(a, repetitions, stimuli):
+            outside.setdefault(a.column, a)
+    notes = [Exclusion(None, "", "repetition outside the design",
+                       f"{_outside_detail([a], repetitions)}; column not imported", column, COLUMN)
+             for column, a in outside.items()]
+    return [a for a in answers if a.column not in outside], notes
+
+
 def _outside(a: Answer, repetitions: int, stimuli: pd.DataFrame) -> bool:
     """A test answer whose repetition is not one of the design's 1…n (practice clips may repeat freely)."""
     return not (1 <= a.repetition <= repetitions) and not stimuli.loc[a.stimulus_id, "practice"]
@@ -186,9 +239,11 @@ def _check_groups(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
         groups[a.participant] |= {shown, stated}
         evidence[a.participant].append((a.row, shown, stated))
     details = {p: _groups_detail(evidence[p], design.between) for p, g in groups.items() if len(g) > 1}
+    stated = {a.participant: ", ".join(b for b in design.between if b in a.groups) for a, _ in scored}
     for a, _ in scored:
         if a.participant in details:
-            drop(a, "several between-subject groups", details[a.participant])
+            # the column is the file's group column where it has one; the detail names the stimuli's rows
+            drop(a, "several between-subject groups", details[a.participant], stated[a.participant])
     return scored
 
 
@@ -219,12 +274,21 @@ def _cell_key(row: pd.Series, factors: list[str]) -> tuple:
     return tuple(str(row[f]) for f in factors)
 
 
-def _check_cells(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
-    """A participant must have at least one valid answer in each design cell of their group."""
+def _check_cells(scored, design: DesignInfo, stimuli: pd.DataFrame, drop,
+                 dropped: list[tuple[Answer, Exclusion]] = (), stimulus_columns: dict[str, list[str]] | None = None):
+    """A participant must have at least one valid answer in each design cell of their group.
+
+    The exclusion names the first missing cell, the columns where its answers would be (``stimulus_columns``;
+    one-answer-per-row formats: ``stimulus_id``) and the participant's answers there that were excluded one by
+    one (``dropped``), which is how a cell that was answered goes missing.
+    """
     tests = design.test_conditions
     cells_of_group = defaultdict(set)
+    stimuli_of_cell = defaultdict(list)
     for _, row in tests.iterrows():
         cells_of_group[_cell_key(row, design.between)].add(_cell_key(row, design.cell_factors))
+        stimuli_of_cell[(_cell_key(row, design.between), _cell_key(row, design.cell_factors))].append(
+            row["stimulus_id"])
     seen = defaultdict(set)
     group_of = {}
     for a, _ in scored:
@@ -237,12 +301,19 @@ def _check_cells(scored, design: DesignInfo, stimuli: pd.DataFrame, drop):
         if a.participant not in group_of:
             drop(a, "missing cells", "no answer to any test stimulus (practice only)")
             continue
-        expected = cells_of_group.get(group_of[a.participant], set())
+        group = group_of[a.participant]
+        expected = cells_of_group.get(group, set())
         missing = sorted(expected - seen[a.participant])
         if missing:
             example = ", ".join(f"{f}={v}" for f, v in zip(design.cell_factors, missing[0]))
+            cell_stimuli = stimuli_of_cell[(group, missing[0])]
+            columns = ("stimulus_id" if stimulus_columns is None else
+                       ", ".join(c for sid in cell_stimuli for c in stimulus_columns.get(sid, [])))
+            gone = [e.reason for b, e in dropped if b.participant == a.participant and b.stimulus_id in cell_stimuli]
+            note = (f"; {len(gone)} answer{'s' if len(gone) > 1 else ''} there excluded "
+                    f"({', '.join(sorted(set(gone)))})" if gone else "")
             drop(a, "missing cells", f"{len(missing)} of {len(expected)} design cells have no valid answer "
-                                     f"(e.g. {example})")
+                                     f"(e.g. {example}{note})", columns)
     return scored
 
 

@@ -12,22 +12,32 @@ the long format's ``response`` names the chosen level. jsPsych's own ``chosen``/
 the answer and are checked against it.
 
 Sessions (several runs by one participant id in one file) are told apart in :mod:`analysis.responses.sessions`.
+A jsPsych file without a participant column is one participant's (the file name is the id); if it holds
+several runs, it is refused rather than read as one participant who ran the experiment many times.
+
+A response time that is not a number ≥ 0 (``fast``, ``-5``; empty or ``null`` is no time, which is fine) makes
+the row "malformed": the time is not analysed, but a cell that cannot be a time shows the row was damaged
+(shifted fields, a hand edit), so its answer is not trusted either — the row is excluded and listed, the file
+and the other answers are kept, as for a ``repetition`` that is no whole number.
 """
 
 from __future__ import annotations
 
 import json
 
+import math
+
+from analysis.errors import AnalysisError
 from analysis.responses.answers import Answer, Exclusion
-from analysis.responses.read import RawFile, _participant_column, cell_number, cell_text
+from analysis.responses.read import PARTICIPANT_COLUMNS, RawFile, _participant_column, cell_number, cell_text
 from analysis.responses.scoring import CHOICE, LEVEL
-from analysis.responses.sessions import session_exclusions
+from analysis.responses.sessions import find_sessions, session_exclusions
 
 
 # Long-CSV columns the importer reads, or that restate the design (what ``simulate --format long`` writes).
 LONG_COLUMNS = {"stimulus_id", "response", "button_pressed", "rt", "rt_ms", "repetition", "trial", "block",
                 "block_label", "practice", "kind", "condition_id", "left", "right", "positions", "end",
-                "shapemotion_protocol", "session", "session_id", "run_id"}
+                "shapemotion_protocol", "session", "session_id", "run_id", "shapemotion_simulated"}
 
 
 # jsPsych data columns that carry no answer of their own: the core fields of every trial
@@ -57,6 +67,8 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
     jspsych = raw.format.startswith("jspsych")
     pids = [cell_text(record.get(pid_col)) if pid_col else raw.path.stem for record in rows]
     wellformed = [raw.format == "jspsych-json" or len(cells) == len(raw.columns) for cells in raw.rows]
+    if pid_col is None:
+        check_one_participant(rows, pids, wellformed, raw)
     session_problem = session_exclusions(rows, pids, wellformed, raw, pid_col)
     answers, exclusions = [], []
     for i, (number, record, cells) in enumerate(zip(raw.row_numbers, rows, raw.rows)):
@@ -80,10 +92,49 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
         if stated and not _whole(stated):
             # Renumbering it would silently put the answer on another repetition.
             exclusions.append(Exclusion(number, pid, "malformed row",
-                                        f"column 'repetition' is {stated!r}; expected a whole number ≥ 1"))
+                                        f"column 'repetition' is {stated!r}; expected a whole number ≥ 1",
+                                        "repetition"))
+            continue
+        bad_time = _bad_time(record, jspsych)
+        if bad_time:
+            exclusions.append(Exclusion(number, pid, "malformed row", bad_time[1], bad_time[0]))
             continue
         answers.append(_answer(record, number, pid, sid, jspsych, between, within))
     return answers, exclusions + unread_columns(raw, [*between, *within])
+
+
+def check_one_participant(rows: list[dict], pids: list[str], wellformed: list[bool], raw: RawFile) -> None:
+    """A file without a participant column is read as one participant's: refuse it when it holds several runs
+    of the experiment (a file of many participants whose id column was lost would otherwise be one participant
+    who ran it many times, and the analysis would say the responses hold a single group)."""
+    sessions = find_sessions(rows, pids, wellformed, raw, None)
+    runs = len(sessions) if not any(s.tangled for s in sessions) else None
+    if runs is not None and runs <= 1:
+        return
+    found = (f"{runs} runs of the experiment (starting in rows "
+             f"{', '.join(str(raw.row_numbers[s.rows[0]]) for s in sessions[:5])}{' …' if runs > 5 else ''})"
+             if runs is not None else f"several runs of the experiment ({sessions[0].tangled})")
+    raise AnalysisError(f"no participant column (one of {', '.join(PARTICIPANT_COLUMNS)}), but the file holds "
+                        f"{found}; without one the whole file would be read as the single participant "
+                        f"{pids[0]!r} (the file name) — add the participant column, or save one file per "
+                        f"participant")
+
+
+def _bad_time(record: dict, jspsych: bool) -> tuple[str, str] | None:
+    """(column, detail) for a response time that is not a number ≥ 0: jsPsych ``rt`` (ms), long ``rt`` (s) or
+    ``rt_ms``. Empty or ``null`` is no time (jsPsych writes null when no response was timed)."""
+    for column, unit in (("rt", "milliseconds" if jspsych else "seconds"), ("rt_ms", "milliseconds")):
+        text = cell_text(record.get(column))
+        if not text or text.lower() == "null":
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value >= 0):
+            return column, f"column {column!r} is {text[:40]!r}; expected a response time in {unit} (a number ≥ 0, " \
+                           f"or empty), so the row is damaged"
+    return None
 
 
 def unread_columns(raw: RawFile, factors: list[str]) -> list[Exclusion]:
