@@ -30,7 +30,8 @@ from analysis.anova_core import CompiledDesign, Design, mauchly, observed_power
 from analysis.anova_data import prepare
 from analysis.errors import AnalysisError
 
-__all__ = ["AnovaTable", "Design", "ManyResult", "anova", "anova_many", "observed_power", "mauchly", "EFFECT_COLUMNS"]
+__all__ = ["AnovaTable", "Design", "ManyResult", "anova", "anova_many", "observed_power", "mauchly", "EFFECT_COLUMNS",
+           "CORRECTED_POWER", "corrected_p", "reported_statistics"]
 
 # Columns of AnovaTable.effects, in order (also the JSON record keys, with "effect" and "factors").
 EFFECT_COLUMNS = [
@@ -154,6 +155,47 @@ def corrected_p(row: pd.Series, correction: str = "none") -> float:
         raise AnalysisError(f"unknown sphericity correction {correction!r}; use none, gg or hf")
     v = float(row[key])
     return float(row["p"]) if math.isnan(v) else v
+
+
+CORRECTED_POWER = ("spss", "uncorrected")
+
+
+def reported_statistics(row: pd.Series, correction: str = "none", corrected_power: str = "spss",
+                        alpha: float = 0.05) -> dict[str, float]:
+    """ε, df1, df2, p, nc and observed power of an effect row as a table reports them under ``correction``.
+
+    ``none``: the row's own numbers (ε NaN). ``gg`` / ``hf``: df1 and df2 multiplied by ε (HF capped at 1)
+    and the corrected p; nc and power then follow ``corrected_power``:
+
+    * ``spss`` (default): SPSS's reading of its corrected rows — λ = F·df1·ε and observed power from the
+      non-central F with the corrected df, i.e. the power of the corrected test the row reports;
+    * ``uncorrected``: λ = F·df1 and power with the uncorrected df (the sphericity-assumed values, as
+      before), whatever the row's df and p.
+
+    Where the effect has no correction (d = 1) or ε is undefined (singular error SSCP), ε is NaN and every
+    number is the uncorrected one.
+
+    >>> row = pd.Series({"F": 4.0, "df1": 2.0, "df2": 20.0, "p": 0.0346, "noncentrality": 8.0, "power": 0.65,
+    ...                  "eps_gg": 0.6, "p_gg": 0.066, "eps_hf": 0.7, "p_hf": 0.055})
+    >>> r = reported_statistics(row, "gg")
+    >>> round(r["df1"], 2), round(r["df2"], 1), round(r["nc"], 2), round(r["power"], 4)
+    (1.2, 12.0, 4.8, 0.4875)
+    >>> reported_statistics(row, "gg", corrected_power="uncorrected")["nc"]
+    8.0
+    """
+    correction = (correction or "none").lower()
+    if corrected_power not in CORRECTED_POWER:
+        raise AnalysisError(f"unknown corrected-power reading {corrected_power!r}; use spss or uncorrected")
+    p = corrected_p(row, correction)   # first: it refuses an unknown correction
+    eps = float(row["eps_gg" if correction == "gg" else "eps_hf"]) if correction != "none" else float("nan")
+    scale = 1.0 if math.isnan(eps) else eps
+    out = {"eps": eps, "df1": float(row["df1"]) * scale, "df2": float(row["df2"]) * scale, "p": p,
+           "nc": float(row["noncentrality"]), "power": float(row["power"])}
+    if scale != 1.0 and corrected_power == "spss":
+        F = float(row["F"])
+        out["nc"] = F * out["df1"]
+        out["power"] = float(observed_power(F, out["df1"], out["df2"], alpha)) if not math.isnan(F) else float("nan")
+    return out
 
 
 def anova(

@@ -39,7 +39,7 @@ def cell_label(cell) -> str:
 
 # -- votes ----------------------------------------------------------------------------------------------
 
-def votes_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
+def votes_section(design: DesignInfo, data: pd.DataFrame, out: Path, simulated: bool = False) -> dict:
     """k-AFC votes: counts per alternative, the test of equal shares overall and per cell, the top level."""
     from analysis import figures
     alt = design.alternatives
@@ -59,7 +59,7 @@ def votes_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     results = {"votes": overall.iloc[0].to_dict(), "tests": tests, "most_voted": most}
     return {"title": f"k-AFC votes per {alt.name}", "html": render_results(tables, "html"), "figures": figs,
             "results": results, "note": "Equal shares under chance. " + PARTICIPANT_NOTE,
-            "files": write_results(tables, out / "vote_results") + ["votes.csv", "vote_tests.csv"]}
+            "files": write_results(tables, out / "vote_results", simulated) + ["votes.csv", "vote_tests.csv"]}
 
 
 def _vote_tests(data: pd.DataFrame, design: DesignInfo, per_cell: pd.DataFrame) -> list[dict]:
@@ -96,7 +96,7 @@ def _vote_tables(counts: pd.DataFrame, tests: list[dict], most: dict, design: De
 
 # -- rankings -------------------------------------------------------------------------------------------
 
-def ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
+def ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path, simulated: bool = False) -> dict:
     """Rankings: points (k … 1), 'ranked first' over participants, Friedman; per within cell too."""
     from analysis import figures
     alt = design.alternatives
@@ -121,7 +121,7 @@ def ranking_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
             "results": results,
             "note": f"Points: k for first place … 1 for last (the thesis scored 4/3/2/1).{pooled} "
                     + PARTICIPANT_NOTE,
-            "files": write_results(tables, out / "rank_results") + ["rank_points.csv"]}
+            "files": write_results(tables, out / "rank_results", simulated) + ["rank_points.csv"]}
 
 
 def _cells(points: pd.DataFrame, design: DesignInfo) -> list[tuple[str, pd.DataFrame]]:

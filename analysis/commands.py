@@ -1,8 +1,10 @@
 """Analysis CLI commands. ``register(subparsers)`` adds each of them (see stimuli.cli).
 
     shapemotion anova DATA.csv --dv COL --subject COL --within A B … --between D …
-        [--posthoc tukey] [--abbrev LEVEL=ABBR …] [--alpha .05] [--correction none|gg|hf]
-        [--format md|tex|csv|html|json] [--out FILE] [--json FILE] [--all]
+        [--posthoc tukey] [--followup univariate|multivariate|statistica] [--adjust tukey|holm|bonferroni|none]
+        [--means emmeans|observed] [--abbrev LEVEL=ABBR …] [--alpha .05] [--correction none|gg|hf]
+        [--format md|tex|csv|html|json|docx] [--out FILE] [--json FILE] [--all]
+        [--style paper|apa] [--corrected-power spss|uncorrected]
 """
 
 from __future__ import annotations
@@ -12,7 +14,12 @@ import sys
 
 from analysis.errors import AnalysisError
 
-TABLE_FORMATS = ("md", "tex", "csv", "html", "json")
+# analysis.posthoc's FOLLOWUPS, ADJUSTMENTS and MEANS_TYPES, spelled out: importing it here would load the
+# ANOVA stack for every shapemotion command (tests/test_posthoc.py checks they agree)
+POSTHOC_FOLLOWUPS = ("univariate", "multivariate", "statistica")
+POSTHOC_ADJUSTMENTS = ("tukey", "holm", "bonferroni", "none")
+POSTHOC_MEANS = ("emmeans", "observed")
+TABLE_FORMATS = ("md", "tex", "csv", "html", "json", "docx")
 
 
 def register(subparsers) -> None:
@@ -37,13 +44,30 @@ def _register_anova(subparsers) -> None:
     p.add_argument("--within", nargs="+", default=[], metavar="FACTOR", help="within-subject factor columns")
     p.add_argument("--between", nargs="+", default=[], metavar="FACTOR", help="between-subjects factor columns")
     p.add_argument("--posthoc", choices=["tukey", "none"], default="none",
-                   help="Tukey HSD for every effect shown (Statistica convention)")
+                   help="pairwise comparisons of every effect shown (Tukey-adjusted unless --adjust); any of "
+                        "--followup/--adjust/--means also turns them on")
+    p.add_argument("--followup", choices=POSTHOC_FOLLOWUPS, default=None,
+                   help="how pairs are tested: univariate (default; emmeans on afex's aov: pooled error and "
+                        "Satterthwaite df for pairs across between groups), multivariate (emmeans on afex's mlm) "
+                        "or statistica (each effect's own error term, as the paper's tables; pairs across "
+                        "between groups not protected)")
+    p.add_argument("--adjust", choices=POSTHOC_ADJUSTMENTS, default=None,
+                   help="p adjustment over each effect's pairs: tukey (default), holm, bonferroni, none")
+    p.add_argument("--means", choices=POSTHOC_MEANS, default=None,
+                   help="marginal means: emmeans (equal weights over groups; default) or observed (n-weighted; "
+                        "the default with --followup statistica)")
     p.add_argument("--abbrev", nargs="+", default=[], metavar="LEVEL=ABBR",
                    help="level abbreviations for post-hoc labels: LEVEL=ABBR or FACTOR:LEVEL=ABBR")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level and power alpha (default 0.05)")
     p.add_argument("--correction", choices=["none", "gg", "hf"], default="none",
                    help="sphericity correction of the p shown (default none, as the paper)")
-    p.add_argument("--format", choices=TABLE_FORMATS, default="md", help="table format (default md)")
+    p.add_argument("--format", choices=TABLE_FORMATS, default="md",
+                   help="table format (default md); docx (Word, APA style) needs --out")
+    p.add_argument("--style", choices=["paper", "apa"], default="paper",
+                   help="p as the paper prints it (<0.001, default) or as APA does (< .001, no leading zero)")
+    p.add_argument("--corrected-power", choices=["spss", "uncorrected"], default="spss",
+                   help="with --correction gg|hf: nc and observed power from the corrected dof, as SPSS (default), "
+                        "or uncorrected")
     p.add_argument("--out", metavar="FILE", help="write the table to FILE instead of standard output")
     p.add_argument("--json", metavar="FILE", help="also write every effect as JSON (DESIGN.md schema)")
     p.add_argument("--all", action="store_true", help="show every effect and the error strata, not only significant ones")
@@ -89,6 +113,8 @@ def run_anova(args: argparse.Namespace) -> int:
     from analysis.posthoc import tukey_all
     from analysis.tables import render
 
+    if args.format == "docx" and not args.out:
+        raise AnalysisError("--format docx writes a Word file: give --out FILE.docx")
     for option, path in (("--out", args.out), ("--json", args.json)):
         if path:
             check_output_file(path, option, [args.data])
@@ -100,14 +126,18 @@ def run_anova(args: argparse.Namespace) -> int:
     except AnalysisError as exc:
         raise AnalysisError(f"{args.data}: {exc}") from None
     check_abbreviations(abbreviations, data, [*args.within, *args.between])
-    if args.posthoc == "tukey":
+    if args.posthoc == "tukey" or any(v is not None for v in (args.followup, args.adjust, args.means)):
         effects = list(table.effects.index) if args.all else table.significant(correction=args.correction)
-        tukey_all(table, effects=effects, abbreviations=abbreviations)
-    text = render(table, args.format, all_rows=args.all, correction=args.correction)
-    if args.out:
-        atomic_write_text(args.out, text)
+        tukey_all(table, effects=effects, abbreviations=abbreviations, followup=args.followup or "univariate",
+                  adjust=args.adjust or "tukey", means=args.means)
+    options = dict(all_rows=args.all, correction=args.correction, corrected_power=args.corrected_power)
+    if args.format == "docx":   # always APA style: the Word table is the one pasted into a paper
+        from analysis.docx_tables import write_docx
+        write_docx(table, args.out, **options)
+    elif args.out:
+        atomic_write_text(args.out, render(table, args.format, style=args.style, **options))
     else:
-        sys.stdout.write(text)
+        sys.stdout.write(render(table, args.format, style=args.style, **options))
     if args.json:
         atomic_write_text(args.json, table.to_json() + "\n")
     return 0

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.io_design import DesignInfo, arrangement_of
+from analysis.simulate import SIMULATED_COLUMN
 
 META = [("StartDate", "Start Date", {"ImportId": "startDate", "timeZone": "Europe/Dublin"}),
         ("EndDate", "End Date", {"ImportId": "endDate", "timeZone": "Europe/Dublin"}),
@@ -67,12 +68,13 @@ def _occurrences(sim: pd.DataFrame) -> pd.Series:
 
 def long_text(sim: pd.DataFrame, design: DesignInfo) -> str:
     """Plain long CSV: one row per answer."""
+    marked = [SIMULATED_COLUMN] if SIMULATED_COLUMN in sim else []   # says "simulated" to the report
     rows = [["participant", *design.between, "block", "trial", "stimulus_id", "repetition", "practice", "response",
-             "rt"]]
+             "rt", *marked]]
     for rec in sim.to_dict("records"):
         rows.append([rec["participant"], *(rec[b] for b in design.between), rec["block"], rec["trial"],
                      rec["stimulus_id"], rec["repetition"], int(rec["practice"]), _long_response(rec, design),
-                     rec["rt"]])
+                     rec["rt"], *(rec[c] for c in marked)])
     return _csv(rows)
 
 
@@ -107,7 +109,8 @@ def qualtrics_text(sim: pd.DataFrame, design: DesignInfo, values: str = "text", 
     qid = {t: f"QID{i + 10}" for i, t in enumerate(tags)}
     blocks = list(dict.fromkeys(sim.sort_values(["block"])["block_label"]))
     block_name = {b: "Block_" + "".join(c if c.isalnum() else "_" for c in b) for b in blocks}
-    embedded = ["participant", "shapemotion_protocol", *design.between]
+    marked = [SIMULATED_COLUMN] if SIMULATED_COLUMN in sim else []   # embedded data that says "simulated"
+    embedded = ["participant", "shapemotion_protocol", *design.between, *marked]
     # Qualtrics writes a block's display order only when it randomises its questions (blocks.trials: random)
     fixed = (design.protocol.get("blocks") or {}).get("trials") == "fixed"
     do_cols = ([] if fixed else [f"{block_name[b]}_DO" for b in blocks]) + ["FL_5_DO"]
@@ -127,7 +130,7 @@ def qualtrics_text(sim: pd.DataFrame, design: DesignInfo, values: str = "text", 
         flow = "|".join(block_name[b] for b in rows.sort_values("trial")["block_label"].drop_duplicates())
         group = [str(rows.iloc[0][b]) for b in design.between]
         protocol = str(design.protocol.get("name", ""))
-        body.append((meta, cells, [str(participant), protocol, *group], shown + [flow]))
+        body.append((meta, cells, [str(participant), protocol, *group, *("1" for _ in marked)], shown + [flow]))
     if legacy:
         return _legacy(body, question_cols, embedded, do_cols, question)
     header = [m[0] for m in META] + question_cols + embedded + do_cols
@@ -191,7 +194,8 @@ def jspsych_records(sim: pd.DataFrame, design: DesignInfo) -> list[dict]:
     protocol = str(design.protocol.get("name", ""))
     for participant, rows in sim.groupby("participant", sort=True):
         common = {"participant": str(participant), "list": int(participant),
-                  **{b: str(rows.iloc[0][b]) for b in design.between}, "protocol": protocol}
+                  **{b: str(rows.iloc[0][b]) for b in design.between}, "protocol": protocol,
+                  **({SIMULATED_COLUMN: 1} if SIMULATED_COLUMN in sim else {})}
         elapsed, index = 5000, 0
         out.append({"rt": 5000, "stimulus": "<p>Consent</p>", "response": 0, "trial_type": "html-button-response",
                     "trial_index": 0, "time_elapsed": elapsed, "internal_node_id": "0.0-0.0", **common})

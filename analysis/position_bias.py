@@ -126,8 +126,9 @@ def first_ranked_positions(data: pd.DataFrame, design: DesignInfo) -> pd.Series:
                      index=data.index, dtype="Int64")
 
 
-def position_section(data: pd.DataFrame, design: DesignInfo, out: Path) -> dict | None:
-    """The report section of the check (files ``position_bias.*``); None without choices or positions.
+def position_section(data: pd.DataFrame, design: DesignInfo, out: Path, simulated: bool = False) -> dict | None:
+    """The report section of the check (files ``position_bias.*``, under the simulated-data banner when
+    ``simulated``); None without choices or positions.
 
     A ranking's 'choice' is the clip it ranks first: a participant who ranks the leftmost clip first
     every time answers by position as much as one who always picks the left clip.
@@ -164,7 +165,7 @@ def position_section(data: pd.DataFrame, design: DesignInfo, out: Path) -> dict 
                  f"files write ±∞ as null; position_bias.json lists these cells under \"non_finite\" and "
                  f"summary.json under \"t_infinite\", with their sign.")
     return {"title": TITLE, "html": render_results(tables, "html"), "figures": [], "note": note,
-            "results": results, "files": write_results(tables, out / "position_bias")}
+            "results": results, "files": write_results(tables, out / "position_bias", simulated)}
 
 
 def position_line(results: dict) -> str:

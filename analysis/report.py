@@ -35,6 +35,8 @@ from analysis.measures import anova_input
 from analysis.position_bias import position_section
 from analysis.responses import ImportResult, import_responses
 from analysis.result_tables import json_safe
+from analysis.simulate import simulated_export
+from analysis.tables import SIMULATED_BANNER
 
 TABLE_FORMATS = ("md", "tex", "csv", "html", "json")
 MAX_INTERACTION_FIGURES = 8
@@ -51,10 +53,11 @@ def analyze(design_dir: str | Path, responses: str | Path, out: str | Path, mode
                             f"({imported.summary()['excluded_by_reason']}); nothing to analyse. "
                             f"{exclusion_examples(imported.exclusions)}")
     _check_between_levels(design, imported, responses)
+    simulated = simulated_export(responses)   # the tool's own simulated file: every output says so
     out = Path(out)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent if out.parent.exists() else None))
     try:
-        context = _write_all(design, imported, staging, models)
+        context = _write_all(design, imported, staging, models, simulated)
         replace_directory(staging, out)
     except AnalysisError as exc:   # e.g. too few participants left: name the file and who was excluded
         shutil.rmtree(staging, ignore_errors=True)
@@ -103,17 +106,17 @@ def exclusion_examples(exclusions: pd.DataFrame) -> str:
     return ("; ".join(parts) + ".") if parts else ""
 
 
-def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bool) -> dict:
+def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bool, simulated: bool = False) -> dict:
     (out / "figures").mkdir(parents=True, exist_ok=True)
     imported.data.to_csv(out / "responses_tidy.csv", index=False, lineterminator="\n")
     imported.exclusions.to_csv(out / "exclusions.csv", index=False, lineterminator="\n")
     sections = []
     if design.dependent_measure in ("mean_rating", "percent_chosen"):
-        sections.append(_anova_section(design, imported.data, out))
+        sections.append(_anova_section(design, imported.data, out, simulated))
     elif design.dependent_measure == "votes":
-        sections.append(votes_section(design, imported.data, out))
+        sections.append(votes_section(design, imported.data, out, simulated))
     else:
-        sections.append(ranking_section(design, imported.data, out))
+        sections.append(ranking_section(design, imported.data, out, simulated))
     sections[0]["note"] = f"{measure_note(design)} {sections[0]['note']}".strip()
     # no variance in the cell values: the models' Wald tests would divide 0 by 0 (the GEE's robust SE is 0)
     if models and not sections[0]["results"].get("not_computed"):
@@ -121,10 +124,10 @@ def _write_all(design: DesignInfo, imported: ImportResult, out: Path, models: bo
         if section:
             sections.append(section)
     # last: a check of the data (left/right preference), not part of the paper's analysis
-    check = position_section(imported.data, design, out)
+    check = position_section(imported.data, design, out, simulated)
     if check:
         sections.append(check)
-    summary = json_safe({"import": imported.summary(), "design": _design_summary(design),
+    summary = json_safe({"simulated": simulated, "import": imported.summary(), "design": _design_summary(design),
                          "sections": [{k: v for k, v in s.items() if k in ("title", "results")} for s in sections]})
     (out / "summary.json").write_text(json.dumps(summary, indent=2, ensure_ascii=False, default=_plain) + "\n")
     context = {"summary": summary, "sections": sections, "imported": imported, "design": design,
@@ -143,9 +146,11 @@ def _plain(value):
 
 # -- sections -------------------------------------------------------------------------------------------
 
-def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
-    """The classic analysis: ANOVA of the cell values, Tukey post-hoc, paper-style tables, figures."""
+def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path, simulated: bool = False) -> dict:
+    """The classic analysis: ANOVA of the cell values, Tukey post-hoc, paper-style tables (also anova.docx, APA
+    style), one APA sentence per significant effect, figures. ``simulated``: the files carry the banner."""
     from analysis.anova import anova
+    from analysis.docx_tables import write_docx
     from analysis.posthoc import tukey_all
     from analysis.tables import render
 
@@ -161,9 +166,10 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     if design.posthoc == "tukey":
         tukey_all(table, abbreviations=abbreviations, alpha=design.alpha)
     for fmt in TABLE_FORMATS:
-        (out / f"anova.{fmt}").write_text(render(table, fmt), encoding="utf-8")
-    (out / "anova_all.md").write_text(render(table, "md", all_rows=True), encoding="utf-8")
-    (out / "anova_gg.md").write_text(render(table, "md", correction="gg"), encoding="utf-8")
+        (out / f"anova.{fmt}").write_text(render(table, fmt, simulated=simulated), encoding="utf-8")
+    (out / "anova_all.md").write_text(render(table, "md", all_rows=True, simulated=simulated), encoding="utf-8")
+    (out / "anova_gg.md").write_text(render(table, "md", correction="gg", simulated=simulated), encoding="utf-8")
+    write_docx(table, out / "anova.docx", simulated=simulated)
     figs = []
     if any(f.maps_to == "body" for f in design.factors) and any(f.maps_to == "motion" for f in design.factors) \
             and design.response_type == "likert":
@@ -183,7 +189,7 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
                      figures.interaction_plot(ai.data, ai.dv, factors, design, stem)))
     significant = table.significant()
     results = {"dv": ai.dv, "within": ai.within, "between": ai.between, "significant": significant,
-               "effects": json.loads(table.to_json()),
+               "effects": json.loads(table.to_json()), "apa": apa_report(table),
                "posthoc": {e: table.posthoc[e].summary if not table.posthoc[e].untestable
                            else f"not tested: {table.posthoc[e].untestable}" for e in table.posthoc}}
     short = short_cells(ai, design)
@@ -197,7 +203,15 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict:
     note = _anova_note(design) + (f" {short_cells_note(short)}" if short else "")
     return {"title": f"{kind} ANOVA of {ai.dv} (the paper's analysis)", "html": render(table, "html") + corrected,
             "note": note, "figures": figs, "results": results,
-            "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova_all.md", "anova_gg.md", "cell_values.csv"]}
+            "files": [f"anova.{f}" for f in TABLE_FORMATS] + ["anova.docx", "anova_all.md", "anova_gg.md",
+                                                              "cell_values.csv"]}
+
+
+def apa_report(table, correction: str = "none") -> dict[str, str]:
+    """The APA sentence of each significant effect (plain text, as in the tables' APA list), for the JSON."""
+    from analysis.tables import table_context
+    return {r["name"]: r["apa"] for s in table_context(table, correction=correction)["sections"] for r in s["rows"]
+            if r["apa"]}
 
 
 def planned_answers(design: DesignInfo, keys: list[str]) -> pd.DataFrame | None:
@@ -382,7 +396,8 @@ def render_report(context: dict, out: Path) -> str:
         sections.append({**s, "figures": figs, "html": Markup(s["html"])})
     return env.get_template("report.html.j2").render(
         summary=context["summary"], sections=sections, exclusions=context["exclusions"],
-        versions=context["versions"], design=context["summary"]["design"], imported=context["summary"]["import"])
+        versions=context["versions"], design=context["summary"]["design"], imported=context["summary"]["import"],
+        banner=SIMULATED_BANNER if context["summary"]["simulated"] else "")
 
 
 def _data_uri(path: Path) -> str:

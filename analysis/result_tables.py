@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.errors import AnalysisError
-from analysis.tables import format_num, format_p, tex_escape
+from analysis.tables import SIMULATED_BANNER, format_num, format_p, md_escape, tex_escape
 
 FORMATS = ("md", "tex", "csv", "html", "json")
 
@@ -67,9 +67,12 @@ def _numeric(frame: pd.DataFrame) -> list[bool]:
 
 
 def _markdown(table: ResultTable) -> str:
+    """Caption, column names and cells are user text (position labels, participant ids, level names):
+    :func:`analysis.tables.md_escape` keeps raw HTML and ``|`` out of the table."""
     align = "|".join("---:" if numeric else "---" for numeric in _numeric(table.frame))
-    lines = [f"**{table.caption}**", "", "| " + " | ".join(map(str, table.frame.columns)) + " |", f"|{align}|"]
-    lines += ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in _text_rows(table.frame)]
+    lines = [f"**{md_escape(table.caption)}**", "",
+             "| " + " | ".join(md_escape(c) for c in table.frame.columns) + " |", f"|{align}|"]
+    lines += ["| " + " | ".join(md_escape(cell) for cell in row) + " |" for row in _text_rows(table.frame)]
     return "\n".join(lines) + "\n"
 
 
@@ -153,8 +156,16 @@ def _csv(tables: list[ResultTable]) -> str:
     return pd.concat(frames, ignore_index=True).to_csv(index=False, lineterminator="\n")
 
 
-def render_results(tables: list[ResultTable], fmt: str) -> str:
-    """All ``tables`` in one of :data:`FORMATS` (md, tex and html: one after the other)."""
+def _banner(fmt: str) -> str:
+    """The simulated-data banner above md, tex and html tables (csv and json stay plain data)."""
+    return {"md": f"> **{md_escape(SIMULATED_BANNER)}**\n\n",
+            "tex": f"\\noindent\\textbf{{{tex_escape(SIMULATED_BANNER)}}}\n\n",
+            "html": f"<p class=\"simulated\"><strong>{html.escape(SIMULATED_BANNER)}</strong></p>\n"}.get(fmt, "")
+
+
+def render_results(tables: list[ResultTable], fmt: str, simulated: bool = False) -> str:
+    """All ``tables`` in one of :data:`FORMATS` (md, tex and html: one after the other, under the
+    simulated-data banner when ``simulated``)."""
     if fmt not in FORMATS:
         raise AnalysisError(f"unknown table format {fmt!r}; choose one of {', '.join(FORMATS)}")
     if fmt == "json":
@@ -162,11 +173,11 @@ def render_results(tables: list[ResultTable], fmt: str) -> str:
     if fmt == "csv":
         return _csv(tables)
     one = {"md": _markdown, "tex": _latex, "html": _html}[fmt]
-    return "\n".join(one(t) for t in tables)
+    return (_banner(fmt) if simulated else "") + "\n".join(one(t) for t in tables)
 
 
-def write_results(tables: list[ResultTable], stem: Path) -> list[str]:
+def write_results(tables: list[ResultTable], stem: Path, simulated: bool = False) -> list[str]:
     """Write ``stem.md``, ``.tex``, ``.csv``, ``.html`` and ``.json``; returns the file names."""
     for fmt in FORMATS:
-        stem.with_suffix(f".{fmt}").write_text(render_results(tables, fmt), encoding="utf-8")
+        stem.with_suffix(f".{fmt}").write_text(render_results(tables, fmt, simulated), encoding="utf-8")
     return [f"{stem.name}.{fmt}" for fmt in FORMATS]

@@ -8,12 +8,17 @@ analysis (:func:`draw`).
 >>> from analysis.model_spec import load_model                          # doctest: +SKIP
 >>> d = load_design("design"); m = load_model(None, d)                  # doctest: +SKIP
 >>> simulate_responses(d, m, participants=16, seed=1).head()            # doctest: +SKIP
+
+Every simulated trial carries ``shapemotion_simulated`` = 1, and every export format writes it (a long-CSV
+column, Qualtrics embedded data, a jsPsych data property), so a report built from a simulated file can say so
+(:func:`simulated_export`) however often the file is converted or re-imported.
 """
 
 from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -22,6 +27,40 @@ from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo, arrangement_of
 from analysis.model_spec import GenerativeModel
 from analysis.practice import practice_flags
+
+
+SIMULATED_COLUMN = "shapemotion_simulated"   # 1 on every row of a simulated export; real exports lack it
+TRUE_TEXT = {"1", "true", "yes"}
+
+
+def simulated_export(path: str | Path) -> bool:
+    """Does the response file (or any file of a response folder) hold rows that ``shapemotion simulate`` wrote?
+
+    True when a row has :data:`SIMULATED_COLUMN` set (``1``/``true``): the column the tool's own exports
+    carry in every format. A real export has no such column; one that names it without a true value on any
+    row is not simulated either.
+
+    >>> import tempfile
+    >>> p = Path(tempfile.mkdtemp()) / "r.csv"
+    >>> _ = p.write_text("participant,stimulus_id,response,shapemotion_simulated\\n1,s1,3,1\\n")
+    >>> simulated_export(p), simulated_export(p.with_name("none.csv"))
+    (True, False)
+    """
+    from analysis.responses.read import read_response_file, response_files
+
+    path = Path(path)
+    files = response_files(path) if path.is_dir() else [path] if path.is_file() else []
+    return any(_has_simulated_rows(read_response_file(f)) for f in files)
+
+
+def _has_simulated_rows(raw) -> bool:
+    if raw.format == "jspsych-json":
+        return any(str(r.get(SIMULATED_COLUMN, "")).strip().lower() in TRUE_TEXT for r in raw.rows
+                   if isinstance(r, dict))
+    if SIMULATED_COLUMN not in raw.columns:
+        return False
+    i = raw.columns.index(SIMULATED_COLUMN)
+    return any(len(r) > i and str(r[i]).strip().lower() in TRUE_TEXT for r in raw.rows)
 
 
 @dataclass
@@ -266,7 +305,7 @@ def simulate_responses(design: DesignInfo, model: GenerativeModel, participants:
 
     Columns: participant, <between>, block, block_label, trial, stimulus_id, repetition, practice, and
     ``rating`` (Likert), ``position`` (1-based, k-AFC) or ``order`` (positions best first, 1-based,
-    ``|``-joined, ranking); ``rt`` in seconds.
+    ``|``-joined, ranking); ``rt`` in seconds; :data:`SIMULATED_COLUMN` (1), which every export writes.
     """
     check_seed(seed)
     rng = np.random.default_rng(seed)
@@ -283,6 +322,7 @@ def simulate_responses(design: DesignInfo, model: GenerativeModel, participants:
         values[~is_test] = _format_answers(design, practice_answers.reshape(-1, *practice_answers.shape[2:]))
     trials[column] = values
     trials["rt"] = np.round(rng.lognormal(np.log(2.5), 0.35, len(trials)), 3)
+    trials[SIMULATED_COLUMN] = 1
     return trials
 
 

@@ -200,11 +200,13 @@ def test_vote_and_ranking_results_are_tables_in_every_format(reports):
         frame = pd.read_csv(report / f"{stem}.csv")
         assert list(frame["table"].unique()) == tables
         md = (report / f"{stem}.md").read_text()
-        assert all(line.startswith(("**", "|")) for line in md.splitlines() if line)
+        assert md.startswith("> **SIMULATED DATA")                 # the fixture's responses are simulated
+        assert all(line.startswith(("**", "|")) for line in md.splitlines()[1:] if line)
         assert "\\toprule" in (report / f"{stem}.tex").read_text()
-        assert "<table class=\"result\">" in (report / f"{stem}.html").read_text()
+        alone = (report / f"{stem}.html").read_text()
+        assert "<table class=\"result\">" in alone and alone.startswith('<p class="simulated">')
         html = (report / "report.html").read_text(encoding="utf-8")
-        assert (report / f"{stem}.html").read_text() in html       # the report shows the same tables
+        assert alone.split("\n", 1)[1] in html       # the report shows the same tables (its banner is on top)
         if name == "thesis_validation":
             friedman = data["tables"][1]["rows"][0]
             assert friedman["chi2"] == results["friedman"]["statistic"] and friedman["p"] == results["friedman"]["p"]
@@ -260,7 +262,9 @@ def test_2afc_report_has_a_position_bias_check_over_participants(reports, tmp_pa
         assert (people[person]["left"], people[person]["choices"]) == (lefts, len(rows))
         assert people[person]["p"] == pytest.approx(stats.binomtest(lefts, len(rows), 0.5).pvalue)
     html = (report / "report.html").read_text(encoding="utf-8")
-    assert (report / "position_bias.html").read_text() in html and "Position-bias check" in html
+    alone = (report / "position_bias.html").read_text()
+    assert alone.startswith('<p class="simulated">')   # simulated responses: the banner tops the file …
+    assert alone.split("\n", 1)[1] in html and "Position-bias check" in html   # … and the report, once
     assert set(pd.read_csv(report / "position_bias.csv")["table"]) == {"position_shares", "position_participants"}
 
 
