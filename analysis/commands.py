@@ -1,7 +1,8 @@
 """Analysis CLI commands. ``register(subparsers)`` adds each of them (see stimuli.cli).
 
     shapemotion anova DATA.csv --dv COL --subject COL --within A B … --between D …
-        [--posthoc tukey] [--abbrev LEVEL=ABBR …] [--alpha .05] [--correction none|gg|hf]
+        [--posthoc tukey] [--followup univariate|multivariate|statistica] [--adjust tukey|holm|bonferroni|none]
+        [--means emmeans|observed] [--abbrev LEVEL=ABBR …] [--alpha .05] [--correction none|gg|hf]
         [--format md|tex|csv|html|json|docx] [--out FILE] [--json FILE] [--all]
         [--style paper|apa] [--corrected-power spss|uncorrected]
 """
@@ -13,6 +14,11 @@ import sys
 
 from analysis.errors import AnalysisError
 
+# analysis.posthoc's FOLLOWUPS, ADJUSTMENTS and MEANS_TYPES, spelled out: importing it here would load the
+# ANOVA stack for every shapemotion command (tests/test_posthoc.py checks they agree)
+POSTHOC_FOLLOWUPS = ("univariate", "multivariate", "statistica")
+POSTHOC_ADJUSTMENTS = ("tukey", "holm", "bonferroni", "none")
+POSTHOC_MEANS = ("emmeans", "observed")
 TABLE_FORMATS = ("md", "tex", "csv", "html", "json", "docx")
 
 
@@ -38,7 +44,18 @@ def _register_anova(subparsers) -> None:
     p.add_argument("--within", nargs="+", default=[], metavar="FACTOR", help="within-subject factor columns")
     p.add_argument("--between", nargs="+", default=[], metavar="FACTOR", help="between-subjects factor columns")
     p.add_argument("--posthoc", choices=["tukey", "none"], default="none",
-                   help="Tukey HSD for every effect shown (Statistica convention)")
+                   help="pairwise comparisons of every effect shown (Tukey-adjusted unless --adjust); any of "
+                        "--followup/--adjust/--means also turns them on")
+    p.add_argument("--followup", choices=POSTHOC_FOLLOWUPS, default=None,
+                   help="how pairs are tested: univariate (default; emmeans on afex's aov: pooled error and "
+                        "Satterthwaite df for pairs across between groups), multivariate (emmeans on afex's mlm) "
+                        "or statistica (each effect's own error term, as the paper's tables; pairs across "
+                        "between groups not protected)")
+    p.add_argument("--adjust", choices=POSTHOC_ADJUSTMENTS, default=None,
+                   help="p adjustment over each effect's pairs: tukey (default), holm, bonferroni, none")
+    p.add_argument("--means", choices=POSTHOC_MEANS, default=None,
+                   help="marginal means: emmeans (equal weights over groups; default) or observed (n-weighted; "
+                        "the default with --followup statistica)")
     p.add_argument("--abbrev", nargs="+", default=[], metavar="LEVEL=ABBR",
                    help="level abbreviations for post-hoc labels: LEVEL=ABBR or FACTOR:LEVEL=ABBR")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level and power alpha (default 0.05)")
@@ -109,9 +126,10 @@ def run_anova(args: argparse.Namespace) -> int:
     except AnalysisError as exc:
         raise AnalysisError(f"{args.data}: {exc}") from None
     check_abbreviations(abbreviations, data, [*args.within, *args.between])
-    if args.posthoc == "tukey":
+    if args.posthoc == "tukey" or any(v is not None for v in (args.followup, args.adjust, args.means)):
         effects = list(table.effects.index) if args.all else table.significant(correction=args.correction)
-        tukey_all(table, effects=effects, abbreviations=abbreviations)
+        tukey_all(table, effects=effects, abbreviations=abbreviations, followup=args.followup or "univariate",
+                  adjust=args.adjust or "tukey", means=args.means)
     options = dict(all_rows=args.all, correction=args.correction, corrected_power=args.corrected_power)
     if args.format == "docx":   # always APA style: the Word table is the one pasted into a paper
         from analysis.docx_tables import write_docx

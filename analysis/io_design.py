@@ -60,6 +60,10 @@ class DesignInfo:
     alpha: float = 0.05
     position_labels: list[str] = field(default_factory=list)
     posthoc: str = "tukey"
+    # how the post-hoc pairs are tested (protocol analysis: followup, adjust, means; see analysis.posthoc)
+    posthoc_followup: str = "univariate"
+    posthoc_adjust: str = "tukey"
+    posthoc_means: str | None = None
     # where the dependent measure came from: "dependent_measure", "protocol.analysis.dependent_measure" or
     # "default" (neither set: the response type's first measure)
     dependent_measure_source: str = "default"
@@ -182,7 +186,26 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
                       alpha=float((_mapping(meta, "analysis", where) or analysis).get("alpha", 0.05)),
                       position_labels=[str(x) for x in response.get("position_labels") or []],
                       posthoc=str((_mapping(meta, "analysis", where) or analysis).get("posthoc", "tukey")),
+                      **_posthoc_settings(_mapping(meta, "analysis", where), analysis, where),
                       dependent_measure_source=measure_source)
+
+
+POSTHOC_CHOICES = {"followup": ("univariate", "multivariate", "statistica"),
+                   "adjust": ("tukey", "holm", "bonferroni", "none"), "means": ("emmeans", "observed")}
+
+
+def _posthoc_settings(meta_analysis: dict, protocol_analysis: dict, where: Path) -> dict:
+    """The post-hoc follow-up, adjustment and means type from ``analysis`` (design.json's, else the protocol's);
+    absent keys keep analysis.posthoc's defaults, unknown values are refused with the field's name."""
+    out = {}
+    for key, choices in POSTHOC_CHOICES.items():
+        value = meta_analysis.get(key, protocol_analysis.get(key))
+        if value is None:
+            continue
+        if value not in choices:
+            raise AnalysisError(f"{where}: analysis.{key} is {value!r}; expected one of {', '.join(choices)}")
+        out[f"posthoc_{key}"] = str(value)
+    return out
 
 
 def _measure(meta: dict, analysis: dict, rtype: str, where: Path) -> tuple[str, str]:

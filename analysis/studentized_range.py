@@ -60,25 +60,53 @@ def _log_s_density(df: float):
     return drop, h, lo, hi
 
 
-def studentized_range_sf(q, k: int, df: float, chunk: int = 1024) -> np.ndarray:
+def studentized_range_sf(q, k: int, df, chunk: int = 1024) -> np.ndarray:
     """P(Q > q) for the studentized range with ``k`` means and ``df`` error degrees of freedom.
 
-    In t = log(q·s) the outer integral is a convolution of log P(R_k > e^t) with the density of log s, so
-    P(R_k > ·) is evaluated once on one uniform t grid covering every q, and each q needs only a weighted sum
-    (trapezoid rule on a shifted grid, weights normalised to sum to one).
+    ``df`` is a number or an array broadcast against ``q`` (one df per value: emmeans' Tukey adjustment of
+    contrasts with Satterthwaite df). In t = log(q·s) the outer integral is a convolution of
+    log P(R_k > e^t) with the density of log s, so P(R_k > ·) is evaluated once on one uniform t grid
+    covering every q, and each q needs only a weighted sum (trapezoid rule on a shifted grid, weights
+    normalised to sum to one).
+
+    >>> round(float(studentized_range_sf(3.5, 3, 20)), 6)
+    0.055892
     """
-    q = np.asarray(q, dtype=float)
     if k < 2:
         raise ValueError("the studentized range needs k >= 2 means")
+    q, df = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(df, dtype=float))
     out = np.ones(q.shape)
     pos = q > 0
     if not pos.any():
         return out
-    qp = q[pos]
+    if np.any(df[pos] <= 0) or np.any(np.isnan(df[pos])):
+        raise ValueError("the studentized range needs df > 0")
+    qp, dfp = q[pos], df[pos]
+    res = np.empty(qp.shape)
+    values = np.unique(dfp)
+    if len(values) <= _MANY_DF:
+        for v in values:
+            sel = dfp == v
+            res[sel] = _sf_one_df(qp[sel], k, float(v), chunk)
+    else:   # many distinct df (Satterthwaite df of simulated data sets): one grid per octave of df
+        inf = ~np.isfinite(dfp)
+        res[inf] = _range_sf(qp[inf], k)
+        octave = np.floor(np.log2(np.where(inf, 1.0, dfp)))
+        for o in np.unique(octave[~inf]):
+            sel = ~inf & (octave == o)
+            res[sel] = _sf_df_array(qp[sel], k, dfp[sel], chunk)
+    out[pos] = np.clip(res, 0.0, 1.0)
+    return out
+
+
+_MANY_DF = 16   # up to this many distinct df, each gets its own grid
+
+
+def _sf_one_df(qp: np.ndarray, k: int, df: float, chunk: int) -> np.ndarray:
+    """P(Q > q) for q > 0 sharing one df (see :func:`studentized_range_sf`)."""
     if not np.isfinite(df):
-        out[pos] = _range_sf(qp, k)
-        return out
-    drop, h, lo, hi = _log_s_density(float(df))
+        return _range_sf(qp, k)
+    drop, h, lo, hi = _log_s_density(df)
     finite = np.isfinite(qp)
     res = np.zeros(qp.shape)
     if finite.any():
@@ -91,5 +119,60 @@ def studentized_range_sf(q, k: int, df: float, chunk: int = 1024) -> np.ndarray:
             w = np.exp(drop(u))
             vals[a:a + chunk] = (w @ r) / w.sum(axis=1)
         res[finite] = vals
-    out[pos] = np.clip(res, 0.0, 1.0)
-    return out
+    return res
+
+
+def _sf_df_array(qp: np.ndarray, k: int, df: np.ndarray, chunk: int) -> np.ndarray:
+    """P(Q > q) for q > 0 with one finite df per value, all df within a factor of two: one t grid, fine
+    enough for the largest df and wide enough for the smallest, and each value's own density of log s."""
+    _, h, lo, hi = _log_s_density(float(df.min()))
+    h = min(h, _log_s_density(float(df.max()))[1])
+    finite = np.isfinite(qp)
+    res = np.zeros(qp.shape)
+    if finite.any():
+        lq, d = np.log(qp[finite]), df[finite]
+        t = np.arange(lq.min() + lo, lq.max() + hi + h, h)
+        r = _range_sf(np.exp(t), k)
+        vals = np.empty(lq.shape)
+        for a in range(0, len(lq), chunk):
+            u = t[None, :] - lq[a:a + chunk, None]
+            with np.errstate(over="ignore"):
+                w = np.exp(d[a:a + chunk, None] * (u - np.expm1(2 * u) / 2))
+            vals[a:a + chunk] = (w @ r) / w.sum(axis=1)
+        res[finite] = vals
+    return res
+
+
+def studentized_range_isf(p, k: int, df, tol: float = 1e-12) -> np.ndarray:
+    """The q with P(Q > q) = p (the upper-p quantile; R's ``qtukey(1 - p, k, df)``), ``df`` as in
+    :func:`studentized_range_sf`. Solved in log q by the Illinois (regula falsi) method to ``tol``.
+
+    >>> round(float(studentized_range_isf(0.05, 3, 20)), 4)
+    3.5779
+    """
+    p, df = np.broadcast_arrays(np.asarray(p, dtype=float), np.asarray(df, dtype=float))
+    if np.any((p <= 0) | (p >= 1)):
+        raise ValueError("studentized_range_isf needs 0 < p < 1")
+    shape = p.shape
+    p, df = p.ravel(), df.ravel()
+    lp = np.log(p)
+
+    def f(x):
+        with np.errstate(divide="ignore"):
+            return np.log(studentized_range_sf(np.exp(x), k, df)) - lp
+
+    a, b = np.full(p.shape, -3.0), np.full(p.shape, 2.0)
+    fa, fb = f(a), f(b)
+    while np.any(fb > 0):      # widen until P(Q > e^b) < p
+        b = np.where(fb > 0, b + 1.0, b)
+        fb = f(b)
+    for _ in range(200):
+        x = b - fb * (b - a) / (fb - fa)
+        fx = f(x)
+        same = np.sign(fx) == np.sign(fb)
+        fa = np.where(same, fa / 2, fb)   # Illinois: halve the stale end's value
+        a = np.where(same, a, b)
+        b, fb = x, fx
+        if np.all(np.abs(b - a) < tol):
+            break
+    return np.exp(b).reshape(shape)

@@ -341,6 +341,10 @@ class Analysis(Strict):
     dependent_measure: Literal["mean_rating", "percent_chosen", "votes", "rank_points"]
     alpha: float = Field(default=0.05, gt=0, lt=1)
     posthoc: Literal["tukey", "none"] = "tukey"
+    # how the post-hoc pairs are tested (analysis.posthoc; None = its defaults: univariate, tukey, emmeans means)
+    followup: Literal["univariate", "multivariate", "statistica"] | None = None
+    adjust: Literal["tukey", "holm", "bonferroni", "none"] | None = None
+    means: Literal["emmeans", "observed"] | None = None
 
 
 class Protocol(Strict):
@@ -407,6 +411,9 @@ class Protocol(Strict):
         for key in ("floor", "label_position", "label_colour"):   # and the display's later settings
             if getattr(self.display, key) is None:
                 del data["display"][key]
+        for key in ("followup", "adjust", "means"):               # and the post-hoc settings
+            if getattr(self.analysis, key) is None:
+                del data["analysis"][key]
         return data
 
 

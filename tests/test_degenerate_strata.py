@@ -156,20 +156,20 @@ def test_tukey_does_not_test_against_an_error_without_variance():
     assert rows["V:G"]["posthoc"] == table.posthoc["V:G"].summary
 
 
-# -- 4. mixed effects: pairs differing only in between-subjects levels are marked ---------------------------
+# -- 4. mixed effects: pairs differing in between-subjects levels are marked by their kind ------------------
 
-def test_between_only_pairs_of_a_mixed_effect_are_marked_without_changing_numbers():
+def test_pairs_of_a_mixed_effect_carry_their_kind():
     d = pd.read_csv(FIXTURES / "exp1.csv")
     table = anova(d, "rating", "participant", ["GAIT", "BODY", "MOTION"], ["SEX"])
-    body_sex = tukey(table, "BODY:SEX")
-    flagged = body_sex.pairs[body_sex.pairs["between_only"]]
+    body_sex = tukey(table, "BODY:SEX", followup="statistica")
+    flagged = body_sex.pairs[body_sex.pairs["kind"] == "between"]
     levels = table.design.within["BODY"]
     assert sorted(zip(flagged["a"], flagged["b"])) == sorted((f"F/{b}", f"M/{b}") for b in levels)
-    assert list(body_sex.records()[0]) == ["a", "b", "diff", "q", "p"]     # JSON schema unchanged
-    assert not tukey(table, "SEX").pairs["between_only"].any()              # between error: nothing to flag
-    assert not tukey(table, "BODY").pairs["between_only"].any()
+    assert body_sex.records()[0]["kind"] == "within" and body_sex.unprotected   # in the JSON, and said
+    assert set(tukey(table, "SEX").pairs["kind"]) == {"between"}
+    assert set(tukey(table, "BODY").pairs["kind"]) == {"within"}
     three = tukey(table, "GAIT:BODY:SEX").pairs
-    assert three["between_only"].sum() == 2 * len(levels)
+    assert (three["kind"] == "between").sum() == 2 * len(levels)
 
 
 # -- 5. the report: values resting on fewer answers than planned ------------------------------------------
