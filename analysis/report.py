@@ -164,7 +164,8 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path, simulated:
     table = _testable(table, design)
     abbreviations = {f.name: f.abbreviations for f in design.factors if f.abbreviations}
     if design.posthoc == "tukey":
-        tukey_all(table, abbreviations=abbreviations, alpha=design.alpha)
+        tukey_all(table, abbreviations=abbreviations, alpha=design.alpha, followup=design.posthoc_followup,
+                  adjust=design.posthoc_adjust, means=design.posthoc_means)
     for fmt in TABLE_FORMATS:
         (out / f"anova.{fmt}").write_text(render(table, fmt, simulated=simulated), encoding="utf-8")
     (out / "anova_all.md").write_text(render(table, "md", all_rows=True, simulated=simulated), encoding="utf-8")
@@ -191,7 +192,8 @@ def _anova_section(design: DesignInfo, data: pd.DataFrame, out: Path, simulated:
     results = {"dv": ai.dv, "within": ai.within, "between": ai.between, "significant": significant,
                "effects": json.loads(table.to_json()), "apa": apa_report(table),
                "posthoc": {e: table.posthoc[e].summary if not table.posthoc[e].untestable
-                           else f"not tested: {table.posthoc[e].untestable}" for e in table.posthoc}}
+                           else f"not tested: {table.posthoc[e].untestable}" for e in table.posthoc},
+               "posthoc_method": {e: table.posthoc[e].method for e in table.posthoc}}
     short = short_cells(ai, design)
     if short:
         results["cells_with_fewer_answers"] = short
