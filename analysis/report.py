@@ -346,13 +346,27 @@ def _models_section(design: DesignInfo, data: pd.DataFrame, out: Path) -> dict |
     if table.empty:
         return None
     table.to_csv(out / "additional_models.csv", index=False, lineterminator="\n")
-    shown = table.assign(chi2=table["chi2"].round(3), p=table["p"].map(lambda p: "" if pd.isna(p) else f"{p:.4f}"))
-    html = "".join(_frame_html(g.drop(columns=["model", "note"]), f"{model} — {g['note'].iloc[0]}", index=False)
-                   for model, g in shown.groupby("model", sort=False))
+    html = "".join(_frame_html(_model_table(g), f"{model} — {g['note'].iloc[0]}", index=False)
+                   for model, g in table.groupby("model", sort=False))
     return {"title": "Additional analyses (modern alternatives, not in the paper)", "html": html, "figures": [],
-            "note": "Wald χ² tests per term. These complement the classic ANOVA above; they are not the paper's "
-                    "analysis.",
+            "note": "Mixed models of the single answers with a random intercept per participant, as R fits them "
+                    "(the caption of each table names the R call it reproduces): F tests with Satterthwaite df "
+                    "for the linear mixed model, Wald χ² per term for the others. These complement the classic "
+                    "ANOVA above; they are not the paper's analysis.",
             "results": {"terms": table.to_dict("records")}, "files": ["additional_models.csv"]}
+
+
+def _model_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """One model's rows as shown: F(df, df_den) for F tests, χ²(df) otherwise; p in APA style."""
+    from analysis.tables import format_p_apa
+    shown = pd.DataFrame({"term": rows["term"]})
+    if rows["F"].notna().any():
+        shown["F"], shown["df"], shown["df_den"] = rows["F"].round(3), rows["df"], rows["df_den"].round(2)
+    elif rows["chi2"].notna().any():
+        shown["χ²"], shown["df"] = rows["chi2"].round(3), rows["df"]
+    if rows["p"].notna().any():
+        shown["p"] = rows["p"].map(format_p_apa)
+    return shown
 
 
 def _frame_html(frame: pd.DataFrame, caption: str, index: bool = True) -> str:

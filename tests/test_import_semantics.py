@@ -392,9 +392,10 @@ def test_additional_models_that_cannot_be_estimated_are_marked_not_computed(rule
     data = import_responses(folder / "responses.csv", design).data
     table = additional_models(data, design)       # used to raise "need covariance of parameters"
     reasons = not_computed_models(table)
-    assert "ordinal (cumulative logit) model" in reasons
-    assert "no covariance matrix" in reasons["ordinal (cumulative logit) model"]
-    assert "single rating across all participants" in reasons["ordinal (cumulative logit) model"]
+    ordinal = "cumulative link mixed model (Laplace, as ordinal::clmm)"
+    assert ordinal in reasons
+    assert "no covariance matrix" in reasons[ordinal] and "lowest or highest category" in reasons[ordinal]
+    assert "single rating across all participants" in reasons[ordinal]
     assert table[table["term"] == "not computed"][["df", "chi2", "p"]].isna().all().all()
 
 
@@ -406,10 +407,10 @@ def test_analyze_writes_the_report_when_the_ordinal_model_cannot_be_fitted(rule_
     assert code == 0 and "Traceback" not in err, err
     report = tmp_path / "report"
     models = pd.read_csv(report / "additional_models.csv")
-    ordinal = models[models["model"] == "ordinal (cumulative logit) model"]
+    ordinal = models[models["model"] == "cumulative link mixed model (Laplace, as ordinal::clmm)"]
     assert ordinal["term"].tolist() == ["not computed"] and ordinal["note"].iloc[0].startswith("not computed: ")
     html = (report / "report.html").read_text(encoding="utf-8")
-    assert "ordinal (cumulative logit) model — not computed: the fit has no covariance matrix" in html
+    assert "cumulative link mixed model (Laplace, as ordinal::clmm) — not computed: the fit has no covariance matrix" in html
 
 
 def test_gee_under_separation_is_not_computed_instead_of_negative_chi2(tmp_path):

@@ -54,8 +54,10 @@ def test_exp1_report_files_tables_and_recovered_effects(reports):
     assert {"BODY", "BODY:SEX"} <= set(significant)
     assert "Tukey" in (report / "anova.md").read_text() and "\\toprule" in (report / "anova.tex").read_text()
     models = pd.read_csv(report / "additional_models.csv")
-    assert set(models["model"]) == {"linear mixed model (MixedLM, REML)", "ordinal (cumulative logit) model"}
-    assert models.set_index(["model", "term"]).loc[("linear mixed model (MixedLM, REML)", "SEX:BODY"), "p"] < 0.001
+    lmm = "linear mixed model (REML, Satterthwaite F tests, as lmerTest)"
+    assert set(models["model"]) == {lmm, "cumulative link mixed model (Laplace, as ordinal::clmm)"}
+    assert models.set_index(["model", "term"]).loc[(lmm, "SEX:BODY"), "p"] < 0.001
+    assert models.set_index(["model", "term"]).loc[(lmm, "SEX"), "df_den"] == pytest.approx(14, abs=1e-4)
 
 
 def test_exclusions_are_listed_and_reconcile(reports):
@@ -77,7 +79,7 @@ def test_exp2_report_has_figure9_and_gee(reports):
     assert results["posthoc"]["METHOD"] == "NC > C"  # Table 4 abbreviations from the protocol
     assert (folder / "report" / "figures" / "figure9.svg").exists()
     models = pd.read_csv(folder / "report" / "additional_models.csv").set_index(["model", "term"])
-    for model in ("logistic GEE (exchangeable, robust SE)", "logistic mixed model (variational Bayes, approximate)"):
+    for model in ("logistic GEE (exchangeable, robust SE)", "logistic mixed model (Laplace, as lme4::glmer)"):
         assert models.loc[(model, "METHOD"), "p"] < 0.001 and models.loc[(model, "SEX:METHOD"), "p"] < 0.01
         assert models.loc[(model, "BODY:METHOD"), "df"] == 3
 
