@@ -105,6 +105,15 @@ def test_extreme_cell_makes_the_ordinal_model_not_computed(simulated):
     assert "every answer in the lowest or highest category (e.g. F/walk/Hi1/Hi1)" in reason
 
 
+def test_design_cell_without_answers_is_named(simulated):
+    data, design = simulated["exp1_shape_motion"]
+    data = data[~((data["BODY"] == "Lo2") & (data["MOTION"] == "Hi1"))]
+    reasons = not_computed_models(additional_models(data, design))
+    assert set(reasons) == {MODEL_NAMES["mixed_model"], MODEL_NAMES["ordinal_model"]}
+    assert all("4 design cell(s) (SEX × GAIT × BODY × MOTION) have no answers (e.g. F/jog/Lo2/Hi1" in reason
+               for reason in reasons.values())
+
+
 def test_models_csv_reads_back(simulated, tmp_path):
     data, design = simulated["exp1_shape_motion"]
     table = additional_models(data, design)

@@ -102,6 +102,17 @@ def test_glmer_equals_r(choice):
     assert fit.converged
 
 
+def test_glmer_with_the_sd_on_its_boundary_equals_r():
+    """No participant differences: τ̂ = 0 (lme4's "singular fit"); the SEs are then those at τ = 0."""
+    r = _json("glmer")["boundary"]
+    frame = pd.read_csv(FIXTURES / "choice_boundary.csv", dtype={"participant": str})
+    fit = glmer_binomial(frame, "first", FACTORS)
+    assert fit.tau == r["tau"] == 0
+    _close(fit.beta, r["beta"]["estimate"], 1e-4)
+    _close(fit.beta_se, r["beta"]["se"], 1e-4)
+    _close(fit.tests["chi2"], pd.DataFrame(r["tests"])["chi2"], 1e-4)
+
+
 def test_glmer_against_r_default_settings(choice):
     """glmer's default Nelder–Mead stops ~4e-4 from the optimum; its SEs are then ~2e-3 off."""
     r = _json("glmer")["default"]

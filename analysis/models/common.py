@@ -64,12 +64,25 @@ def design_matrix(frame: pd.DataFrame, factors: list[str]) -> tuple[np.ndarray, 
     import patsy
     frame = frame[factors].astype(str) if factors else pd.DataFrame(index=frame.index)
     X = patsy.dmatrix(formula_rhs(factors), frame, return_type="matrix")
+    if np.linalg.matrix_rank(np.asarray(X)) < X.shape[1]:
+        raise ModelNotComputed(f"the full-factorial model is not identified: {_empty_cells(frame, factors)}")
     terms = {}
     for term, columns in X.design_info.term_slices.items():
         names = [FACTOR_IN_TERM.fullmatch(f.name()).group(1) for f in term.factors]
         if names:
             terms[":".join(names)] = columns
     return np.asarray(X), terms
+
+
+def _empty_cells(frame: pd.DataFrame, factors: list[str]) -> str:
+    """Which combinations of the factors' levels have no answers (R would drop the aliased columns)."""
+    grid = pd.MultiIndex.from_product([sorted(frame[f].unique()) for f in factors])
+    seen = pd.MultiIndex.from_frame(frame[factors].drop_duplicates())
+    missing = ["/".join(cell) for cell in grid.difference(seen)]
+    if not missing:
+        return "its columns are linearly dependent"
+    return (f"{len(missing)} design cell(s) ({' × '.join(factors)}) have no answers (e.g. "
+            f"{', '.join(missing[:3])}), so their coefficients cannot be estimated")
 
 
 def wald_terms(params: np.ndarray, cov: np.ndarray, terms: dict[str, slice], model: str) -> pd.DataFrame:
