@@ -299,3 +299,24 @@ def test_files_over_the_size_limit_are_refused(likert, tmp_path, monkeypatch):
         import_responses(path, likert[0])
     assert "long.csv" in str(err.value) and "over the limit of 1,000 bytes" in str(err.value)
     assert f"{path.stat().st_size:,} bytes" in str(err.value)
+
+
+# -- found by tests/test_responses_fuzz.py --------------------------------------------------------------------
+
+def test_a_trial_number_too_large_for_a_float_is_no_trial_number(likert, tmp_path):
+    """``trial`` = 1e309 is infinite as a float: int() of it raised OverflowError (a traceback)."""
+    rows = _export(likert, "jspsych")
+    sid, trial = rows[0].index("stimulus_id"), rows[0].index("trial")
+    next(r for r in rows[1:] if r[sid])[trial] = "1e309"
+    result = import_responses(_write(tmp_path / "j.csv", rows), likert[0])
+    assert result.reconciles and len(result.data) == len(likert[1])
+
+
+def test_a_huge_cell_is_cut_in_the_error_message(likert, tmp_path):
+    """A 100,000-character protocol cell used to be repeated whole (twice) in the one-line error."""
+    rows = _export(likert, "long")
+    rows = [rows[0] + ["shapemotion_protocol"]] + [r + ["mini_likert"] for r in rows[1:]]
+    rows[3][-1] = "x" * 100_000
+    with pytest.raises(AnalysisError) as err:
+        import_responses(_write(tmp_path / "long.csv", rows), likert[0])
+    assert "(100,000 characters)" in str(err.value) and len(str(err.value)) < 1000

@@ -28,7 +28,7 @@ from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import ANSWER, FILE, ROW, TagIndex
 from analysis.responses.qualtrics import qualtrics_answers
-from analysis.responses.read import RawFile, folder_entries, read_response_file, response_files
+from analysis.responses.read import RawFile, folder_entries, read_response_file, response_files, shown
 from analysis.responses.tidy import assemble
 from analysis.responses.trialwise import trialwise_answers
 
@@ -144,9 +144,9 @@ def check_protocol(raw: RawFile, design: DesignInfo) -> None:
             value = str(value if value is not None else "").strip()
             if value and value != expected:
                 raise AnalysisError(
-                    f"{raw.path}: row {number}: column {column!r} says the responses are from protocol {value!r}, "
+                    f"{raw.path}: row {number}: column {column!r} says the responses are from protocol {shown(value)}, "
                     f"but the design {design.directory} is {expected!r}; analyse them against the design of "
-                    f"{value!r}")
+                    f"{shown(value)}")
 
 
 def _tag_index(design: DesignInfo) -> TagIndex:

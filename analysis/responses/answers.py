@@ -11,6 +11,7 @@ import re
 from dataclasses import dataclass, field
 
 from analysis.errors import AnalysisError
+from analysis.responses.read import shown
 from analysis.responses.scoring import CHOICE
 
 
@@ -98,7 +99,7 @@ class TagIndex:
         found = index.get(key, set())
         if len(found) > 1:
             raise AnalysisError(
-                f"export tag {tag!r} names {len(found)} stimuli of the design {how}: "
+                f"export tag {shown(tag)} names {len(found)} stimuli of the design {how}: "
                 f"{' and '.join(repr(s) for s in sorted(found))}; their ids differ only in case or punctuation, so "
                 f"the column cannot be matched to one of them — rename the question to the exact stimulus id, or "
                 f"give the stimuli ids that differ in letters or digits (or an export_tag column in manifest.csv)")
@@ -115,7 +116,7 @@ class TagIndex:
         loose = self._lookup(tag, exact=False)
         if loose is not None and base is not None and loose != base:
             raise AnalysisError(
-                f"export tag {tag!r} could be stimulus {loose!r} (case and punctuation ignored) or repetition "
+                f"export tag {shown(tag)} could be stimulus {loose!r} (case and punctuation ignored) or repetition "
                 f"{m['rep']} of stimulus {base!r}; rename the question to the exact stimulus id (repetitions: "
                 f"<stimulus id>_r<k>)")
         if loose is not None:

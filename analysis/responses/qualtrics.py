@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 from analysis.errors import AnalysisError
 from analysis.responses.answers import Answer, Exclusion, TagIndex
-from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_column
+from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_column, shown
 from analysis.responses.scoring import CHOICE, LABEL
 
 TIMING = re.compile(r"_(First Click|Last Click|Page Submit|Click Count)$", re.IGNORECASE)
@@ -69,7 +69,7 @@ def _match(name: str, tags: TagIndex, ranking: bool) -> tuple[str, int | None, i
     try:
         return _match_tag(name, tags, ranking)
     except AnalysisError as exc:   # several stimuli fit the tag
-        raise AnalysisError(f"column {name!r}: {exc}") from None
+        raise AnalysisError(f"column {shown(name)}: {exc}") from None
 
 
 def _match_tag(name: str, tags: TagIndex, ranking: bool) -> tuple[str, int | None, int | None] | None:
@@ -92,7 +92,8 @@ def check_one_column_per_answer(raw: RawFile, cols: QualtricsColumns) -> None:
         if other != i:
             what = f"repetition {rep} of stimulus {sid!r}" if rep is not None else f"stimulus {sid!r}"
             where = f" at rank position {pos}" if pos is not None else ""
-            raise AnalysisError(f"columns {other + 1} and {i + 1} ({raw.columns[other]!r} and {raw.columns[i]!r}) "
+            names = f"{shown(raw.columns[other])} and {shown(raw.columns[i])}"
+            raise AnalysisError(f"columns {other + 1} and {i + 1} ({names}) "
                                 f"both answer {what}{where} (their tags differ only in case or punctuation); "
                                 f"rename or remove one of them")
 
@@ -113,7 +114,7 @@ def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking:
     cols = classify_columns(raw, tags, ranking)
     check_one_column_per_answer(raw, cols)
     exclusions = [Exclusion(None, "", "unknown export tag",
-                            f"question {raw.columns[i]!r} ({_text(raw, i)}) names no stimulus of the design; "
+                            f"question {shown(raw.columns[i])} ({_text(raw, i)}) names no stimulus of the design; "
                             f"column not imported", raw.columns[i]) for i in cols.unknown]
     pid_col = _id_column(raw)
     finished = _find(raw.columns, "Finished")

@@ -117,8 +117,10 @@ def read_response_file(path: str | Path, refuse_repeated: bool = True) -> RawFil
         raise AnalysisError(f"{path}: the file is empty (expected a response export with a header row)")
     raw = _read_json(path, stripped) if stripped[0] in "[{" else _read_csv(path, text)
     if refuse_repeated and raw.repeated:
-        raise AnalysisError(f"{path}: {'; '.join(raw.repeated)}; a column named twice would have one column's "
-                            f"answers replace the other's (a merge or a hand edit?): rename or remove one of them")
+        more = f"; and {len(raw.repeated) - 3} more" if len(raw.repeated) > 3 else ""
+        raise AnalysisError(f"{path}: {'; '.join(raw.repeated[:3])}{more}; a column named twice would have one "
+                            f"column's answers replace the other's (a merge or a hand edit?): rename or remove one of "
+                            f"them")
     return raw
 
 
@@ -126,14 +128,16 @@ def repeated_columns(columns: list[str]) -> list[str]:
     """Messages for the names that several columns share (1-based positions, as a spreadsheet counts), and for
     participant columns that differ only in case (the importer finds those case-insensitively).
 
-    >>> repeated_columns(["participant", "Q3_1", "rt", "Q3_1", "PARTICIPANT"])
-    ["columns 2 and 4 are both named 'Q3_1'", "columns 1 and 5 ('participant' and 'PARTICIPANT') both name the participant"]
+    >>> for message in repeated_columns(["participant", "Q3_1", "rt", "Q3_1", "PARTICIPANT"]):
+    ...     print(message)
+    columns 2 and 4 are both named 'Q3_1'
+    columns 1 and 5 ('participant' and 'PARTICIPANT') both name the participant
     """
     positions: dict[str, list[int]] = {}
     for i, name in enumerate(columns, 1):
         if name:   # a blank header names nothing the importer reads
             positions.setdefault(name, []).append(i)
-    out = [f"columns {_and(where)} are {'both' if len(where) == 2 else 'all'} named {name!r}"
+    out = [f"columns {_and(where)} are {'both' if len(where) == 2 else 'all'} named {shown(name)}"
            for name, where in positions.items() if len(where) > 1]
     wanted = {c.lower() for c in PARTICIPANT_COLUMNS}
     by_case: dict[str, list[str]] = {}
@@ -143,7 +147,7 @@ def repeated_columns(columns: list[str]) -> list[str]:
     for names in by_case.values():
         if len(names) > 1:
             where = [positions[n][0] for n in names]
-            out.append(f"columns {_and(where)} ({_and([repr(n) for n in names])}) both name the participant")
+            out.append(f"columns {_and(where)} ({_and([shown(n) for n in names])}) both name the participant")
     return out
 
 
@@ -236,7 +240,7 @@ def _read_csv(path: Path, text: str) -> RawFile:
     raise AnalysisError(
         f"{path}: no recognisable header row; expected a Qualtrics export (ResponseId, Finished, … then the "
         f"questions' export tags), jsPsych data (trial_type, response, stimulus_id, …) or a long CSV with "
-        f"columns participant, stimulus_id, response; the first row is {header[:6]}")
+        f"columns participant, stimulus_id, response; the first row is [{', '.join(shown(h) for h in header[:6])}]")
 
 
 def _is_qualtrics(header: list[str]) -> bool:
@@ -273,7 +277,7 @@ def _import_id(path: Path, cell: str) -> dict:
     try:
         value = json.loads(cell)
     except json.JSONDecodeError:
-        raise AnalysisError(f"{path}: row 3: {cell!r} is not the ImportId JSON Qualtrics writes "
+        raise AnalysisError(f"{path}: row 3: {shown(cell)} is not the ImportId JSON Qualtrics writes "
                             f"(e.g. {{\"ImportId\":\"QID1\"}})") from None
     return value if isinstance(value, dict) else {}
 
@@ -282,6 +286,16 @@ def _participant_column(columns: list[str]) -> str | None:
     """The first column that names participants (``participant``, ``PROLIFIC_PID``, …)."""
     lower = {c.lower(): c for c in columns}
     return next((lower[c.lower()] for c in PARTICIPANT_COLUMNS if c.lower() in lower), None)
+
+
+def shown(value, limit: int = 60) -> str:
+    """A cell or header quoted for a message, cut to ``limit`` characters: a damaged cell may hold megabytes.
+
+    >>> shown("Q3_1"), shown("x" * 100_000, 5)
+    ("'Q3_1'", "'xxxxx…' (100,000 characters)")
+    """
+    text = str(value)
+    return repr(text) if len(text) <= limit else f"{text[:limit] + '…'!r} ({len(text):,} characters)"
 
 
 def cell_text(value) -> str:
@@ -294,10 +308,14 @@ def cell_text(value) -> str:
 
 
 def cell_number(value) -> float | None:
-    """A cell as a number (None when it is not one)."""
+    """A cell as a finite number (None when it is not one: ``1e309`` is no trial number or repetition).
+
+    >>> cell_number("2.0"), cell_number("fast"), cell_number("1e309"), cell_number(float("nan"))
+    (2.0, None, None, None)
+    """
     text = cell_text(value)
     try:
         number = float(text)
     except ValueError:
         return None
-    return None if math.isnan(number) else number
+    return number if math.isfinite(number) else None

@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import re
 
+from analysis.responses.read import shown
+
 CHOICE = "choice"   # a survey's answer option: number = 1-based position, text = its position label
 LABEL = "label"     # a Qualtrics choice-text export: the answer option's text, even when it looks like a number
 LEVEL = "level"     # the long format: the chosen level's name
@@ -73,10 +75,10 @@ def score_likert(value: str, labels: list[str], k: int | None = None, reading: s
     if number is not None:
         if 1 <= number <= k:
             return number
-        raise OutsideScale(f"{value!r} is outside 1…{k}")
+        raise OutsideScale(f"{shown(value)} is outside 1…{k}")
     if _norm(value) in names:
         return names[_norm(value)]
-    raise OutsideScale(f"{value!r} is neither 1…{k} nor one of the labels {labels}")
+    raise OutsideScale(f"{shown(value)} is neither 1…{k} nor one of the labels {labels}")
 
 
 def screen_labels(position_labels: list[str], k: int) -> list[str]:
@@ -108,10 +110,10 @@ def _position(token: str, arrangement: list[str], position_labels: list[str], re
     as_level = levels.index(text) + 1 if text in levels else None
     as_label = labels.get(text, set())
     if len(as_label) > 1:
-        raise OutsideScale(f"{token!r} names several screen positions {sorted(as_label)}")
+        raise OutsideScale(f"{shown(token)} names several screen positions {sorted(as_label)}")
     as_label = next(iter(as_label), None)
     as_number = number if number is not None and 1 <= number <= k else None
-    shown = screen_labels(position_labels, k)
+    on_screen = screen_labels(position_labels, k)
     if reading == LEVEL:
         if as_level is not None:
             return as_level
@@ -123,7 +125,7 @@ def _position(token: str, arrangement: list[str], position_labels: list[str], re
             return as_number
         allowed = ["a level name " + str(arrangement)]
         if not level_like_label:
-            allowed.append(f"a position label {shown}" + (" or left/right" if k == 2 else ""))
+            allowed.append(f"a position label {on_screen}" + (" or left/right" if k == 2 else ""))
         if not level_like_number:
             allowed.append(f"a 1-based position 1…{k}")
         note = ""
@@ -131,21 +133,21 @@ def _position(token: str, arrangement: list[str], position_labels: list[str], re
             note = " (the long format reads numbers as level names here, as some levels are numbers)"
         elif level_like_label and as_label is not None:
             note = " (the long format reads it as a level name here, as some levels are named like positions)"
-        raise OutsideScale(f"{token!r} is not {' or '.join(allowed)}{note}")
+        raise OutsideScale(f"{shown(token)} is not {' or '.join(allowed)}{note}")
     # CHOICE: number → position; text → position label / side; a level name only where it is neither
     if number is not None:
         if as_number is None:
-            raise OutsideScale(f"{token!r} is not a screen position 1…{k} (a number in a survey export is the "
+            raise OutsideScale(f"{shown(token)} is not a screen position 1…{k} (a number in a survey export is the "
                                f"answer option's position, not a level)")
         if as_label is not None and as_label != as_number:
-            raise OutsideScale(f"{token!r} is ambiguous: position {as_number}, but also the label of position "
-                               f"{as_label} ({shown})")
+            raise OutsideScale(f"{shown(token)} is ambiguous: position {as_number}, but also the label of position "
+                               f"{as_label} ({on_screen})")
         return as_number
     if as_label is not None:
         return as_label
     if as_level is not None:
         return as_level
-    raise OutsideScale(f"{token!r} names none of the {k} screen positions (labels {shown}"
+    raise OutsideScale(f"{shown(token)} names none of the {k} screen positions (labels {on_screen}"
                        f"{', left/right' if k == 2 else ''} or 1…{k}) nor one of the levels {arrangement}")
 
 
@@ -167,12 +169,12 @@ def score_ranking(ranks: list[str] | None, order: str, arrangement: list[str],
         return [arrangement[numbers.index(r)] for r in range(1, k + 1)]
     tokens = [t for t in re.split(r"\s*[>,;|]\s*", str(order).strip()) if t]
     if len(tokens) != k:
-        raise OutsideScale(f"{order!r} is not an order of all {k} alternatives (e.g. "
+        raise OutsideScale(f"{shown(order)} is not an order of all {k} alternatives (e.g. "
                            f"{'>'.join(screen_labels(position_labels, k) if reading == CHOICE else arrangement)})")
     try:
         positions = [_position(t, arrangement, position_labels, reading) for t in tokens]
     except OutsideScale as exc:
-        raise OutsideScale(f"{order!r} is not an order of all {k} alternatives: {exc}") from None
+        raise OutsideScale(f"{shown(order)} is not an order of all {k} alternatives: {exc}") from None
     if len(set(positions)) != k:
-        raise OutsideScale(f"{order!r} names a position twice; expected each of the {k} alternatives once")
+        raise OutsideScale(f"{shown(order)} names a position twice; expected each of the {k} alternatives once")
     return [arrangement[p - 1] for p in positions]

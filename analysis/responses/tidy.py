@@ -27,6 +27,7 @@ import pandas as pd
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import ANSWER, COLUMN, ROW, Answer, Exclusion
+from analysis.responses.read import shown
 from analysis.responses.scoring import OutsideScale, score_choice, score_likert, score_ranking
 
 EXCLUSION_COLUMNS = ["row", "participant", "reason", "detail", "column", "scope"]
@@ -65,7 +66,7 @@ def assemble(answers: list[Answer], exclusions: list[Exclusion], rows: list[int]
     kept = []
     for a in answers:
         if a.stimulus_id not in stimuli.index:
-            drop_answer(a, "unknown stimulus", f"stimulus_id {a.stimulus_id!r} is not in conditions.csv")
+            drop_answer(a, "unknown stimulus", f"stimulus_id {shown(a.stimulus_id)} is not in conditions.csv")
         else:
             kept.append(a)
     check_declared_levels(kept, stimuli)
@@ -112,7 +113,8 @@ def check_declared_levels(answers: list[Answer], stimuli: pd.DataFrame) -> None:
         for factor, value in a.declared.items():
             level = str(stimuli.loc[a.stimulus_id].get(factor, ""))
             if level and value.strip().casefold() != level.casefold():
-                raise AnalysisError(f"row {a.row}: column {factor!r} is {value!r}, but stimulus {a.stimulus_id} has "
+                raise AnalysisError(f"row {a.row}: column {factor!r} is {shown(value)}, but stimulus {a.stimulus_id} "
+                                    f"has "
                                     f"{factor} = {level!r} in conditions.csv; the file and the design disagree")
 
 
@@ -221,8 +223,9 @@ def check_restated(a: Answer, score: dict, design: DesignInfo) -> None:
         if str(score[column]).strip().casefold() != value.strip().casefold():
             where = (f" (positions {'|'.join(design.arrangement(a.stimulus_id))} in conditions.csv)"
                      if column == "chosen" else "")
-            raise AnalysisError(f"row {a.row}: column {column!r} is {value!r}, but the answer {a.column} = {a.value!r} "
-                                f"of participant {a.participant!r} to stimulus {a.stimulus_id} is {column} "
+            raise AnalysisError(f"row {a.row}: column {column!r} is {shown(value)}, but the answer {a.column} = "
+                                f"{shown(a.value)} "
+                                f"of participant {shown(a.participant)} to stimulus {a.stimulus_id} is {column} "
                                 f"{score[column]!r}{where}; the file and the design disagree")
 
 

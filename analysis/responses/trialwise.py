@@ -29,7 +29,7 @@ import math
 
 from analysis.errors import AnalysisError
 from analysis.responses.answers import Answer, Exclusion
-from analysis.responses.read import PARTICIPANT_COLUMNS, RawFile, _participant_column, cell_number, cell_text
+from analysis.responses.read import PARTICIPANT_COLUMNS, RawFile, _participant_column, cell_number, cell_text, shown
 from analysis.responses.scoring import CHOICE, LEVEL
 from analysis.responses.sessions import find_sessions, session_exclusions
 
@@ -92,7 +92,7 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
         if stated and not _whole(stated):
             # Renumbering it would silently put the answer on another repetition.
             exclusions.append(Exclusion(number, pid, "malformed row",
-                                        f"column 'repetition' is {stated!r}; expected a whole number ≥ 1",
+                                        f"column 'repetition' is {shown(stated)}; expected a whole number ≥ 1",
                                         "repetition"))
             continue
         bad_time = _bad_time(record, jspsych)
@@ -132,7 +132,7 @@ def _bad_time(record: dict, jspsych: bool) -> tuple[str, str] | None:
         except ValueError:
             value = math.nan
         if not (math.isfinite(value) and value >= 0):
-            return column, f"column {column!r} is {text[:40]!r}; expected a response time in {unit} (a number ≥ 0, " \
+            return column, f"column {column!r} is {shown(text)}; expected a response time in {unit} (a number ≥ 0, " \
                            f"or empty), so the row is damaged"
     return None
 
@@ -145,7 +145,7 @@ def unread_columns(raw: RawFile, factors: list[str]) -> list[Exclusion]:
     jspsych = raw.format.startswith("jspsych")
     known = LONG_COLUMNS | set(factors) | {_participant_column(raw.columns)} | (JSPSYCH_COLUMNS if jspsych else set())
     fmt = "jsPsych data" if jspsych else "the long format"
-    return [Exclusion(None, "", "column not imported", f"column {name!r} is not a column {fmt} reads "
+    return [Exclusion(None, "", "column not imported", f"column {shown(name)} is not a column {fmt} reads "
                                                        f"(participant, stimulus_id, response, rt, repetition, trial, "
                                                        f"factor columns, …); column not imported", name)
             for name in raw.columns if name not in known]
