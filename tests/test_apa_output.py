@@ -70,6 +70,20 @@ def test_spss_reading_on_a_hand_computed_example():
         reported_statistics(row, "gg", "both")
 
 
+def test_corrected_df_and_p_equal_a_published_spss_table():
+    """SPSS GLM output for 5 subjects × 3 conditions (UCLA ATS "Repeated measures ANOVA in SPSS" code fragment,
+    Example 1): F = 4.725; Greenhouse–Geisser df 1.269, 5.075, p .077; Huynh–Feldt 1.590, 6.361, p .060; ε .634 and
+    .795. (That output has no nc/power columns; those are checked against scipy above.)"""
+    rows = [(1, 100, 90, 130), (2, 90, 100, 100), (3, 110, 110, 109), (4, 100, 90, 109), (5, 100, 100, 130)]
+    d = pd.DataFrame([(s, f"c{i}", v) for s, *vals in rows for i, v in enumerate(vals)],
+                     columns=["subject", "cond", "y"])
+    row = anova(d, "y", "subject", ["cond"]).effect("cond")
+    assert round(row["F"], 3) == 4.725 and (round(row["eps_gg"], 3), round(row["eps_hf"], 3)) == (0.634, 0.795)
+    for correction, want in (("gg", (1.269, 5.075, 0.077)), ("hf", (1.590, 6.361, 0.060))):
+        got = reported_statistics(row, correction)
+        assert (round(got["df1"], 3), round(got["df2"], 3), round(got["p"], 3)) == want
+
+
 def test_tables_print_the_corrected_nc_and_power(exp1):
     row = exp1.effect("BODY:MOTION")
     spss = reported_statistics(row, "gg", "spss", exp1.alpha)
