@@ -64,7 +64,7 @@ def design_matrix(frame: pd.DataFrame, factors: list[str]) -> tuple[np.ndarray, 
     import patsy
     frame = frame[factors].astype(str) if factors else pd.DataFrame(index=frame.index)
     X = patsy.dmatrix(formula_rhs(factors), frame, return_type="matrix")
-    if np.linalg.matrix_rank(np.asarray(X)) < X.shape[1]:
+    if np.linalg.matrix_rank(np.asarray(X).T @ np.asarray(X)) < X.shape[1]:   # p × p: cheaper than X's SVD
         raise ModelNotComputed(f"the full-factorial model is not identified: {_empty_cells(frame, factors)}")
     terms = {}
     for term, columns in X.design_info.term_slices.items():

@@ -106,9 +106,9 @@ def _minimise_theta(sums: _Sums) -> float:
 def fit_lmm(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> LmmFit:
     """REML fit of ``y ~ X + (1 | groups)`` (X includes the intercept and must have full column rank)."""
     X, y = np.asarray(X, float), np.asarray(y, float)
-    if np.linalg.matrix_rank(X) < X.shape[1]:
-        raise ValueError("the fixed-effects design is rank deficient (a design cell without answers?)")
     sums = _Sums(X, y, np.asarray(groups))
+    if np.linalg.matrix_rank(sums.XtX) < X.shape[1]:
+        raise ValueError("the fixed-effects design is rank deficient (a design cell without answers?)")
     if sums.n <= sums.p or not np.isfinite(sums.profiled(1.0)):
         raise ValueError("the residual variance is 0: the factors and participants account for every rating "
                          "exactly, so the F tests would divide by a zero standard error")
