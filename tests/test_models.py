@@ -46,6 +46,16 @@ def test_analytic_gradient_equals_finite_differences(family_name, n_agq):
     assert np.isfinite(value) and np.abs(grad - numeric).max() < 1e-5 * max(1.0, np.abs(grad).max())
 
 
+def test_thresholds_out_of_order_have_no_likelihood():
+    """The optimiser must see such a point as the worst, never the best (P(Y = j) < 0 there)."""
+    groups, X, _, ordinal = _toy()
+    family = CumulativeLogit(X[:, 1:], ordinal, 5)
+    objective = _Objective(family, groups, 1)
+    psi = np.concatenate([family.start(), [0.8]])
+    psi[[1, 2]] = psi[[2, 1]]
+    assert objective.value_and_gradient(psi)[0] == -np.inf
+
+
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
     """Exp. 1 (Likert, SEX between × 3 within) and Exp. 2 (2AFC) with 16 simulated participants."""

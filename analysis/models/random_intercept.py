@@ -177,15 +177,17 @@ class _Objective:
                     break
                 step = np.where(worse, step / 2, step)
             u, g, d = u + step, g_try, d_try
-        self.modes = u
+        if np.all(np.isfinite(u)):   # the next call starts here (warm start); never from a failed point
+            self.modes = u
         return u, D, d
 
     def value_and_gradient(self, psi: np.ndarray):
+        """log L(ψ) and its gradient; −inf where the predictors are invalid (e.g. thresholds out of order)."""
         phi, tau = psi[:-1], psi[-1]
         fam, groups, G = self.family, self.groups, self.G
         u, D, d = self.conditional_modes(phi, tau)
         if not np.all(np.isfinite(D)) or np.any(D <= 0) or not np.all(np.isfinite(d.ll)):
-            return np.inf, np.zeros_like(psi)
+            return -np.inf, np.zeros_like(psi)
         ls, lss, lsss = self._shift_derivatives(d)
         S_ls, S_lss, S_lsss = self._sum(ls), self._sum(lss), self._sum(lsss)
         sg = fam.sign
