@@ -52,7 +52,7 @@ def docx_bytes(table: AnovaTable, all_rows: bool = False, correction: str = "non
         doc.add_paragraph(f"{ctx['apa_title']}:")
         for r in reported:
             par = doc.add_paragraph(style="List Bullet")
-            par.add_run(f"{r['effect']}: ")
+            par.add_run(f"{r['label']}: ")
             for text, italic in r["apa_parts"]:
                 par.add_run(text).italic = italic
     buffer = io.BytesIO()

@@ -296,6 +296,7 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
             "numbers": [None if math.isnan(float(row[c])) else float(row[c]) for c in EFFECT_COLUMNS],
             "p_reported": _finite_or_none(p),   # blank in CSV, as the other undefined numbers
             "reported": [rep["df1"], rep["df2"], _finite_or_none(rep["nc"]), _finite_or_none(rep["power"])],
+            "label": " × ".join(row["factors"]),   # the APA sentences' name of the effect
             "apa": apa_sentence(sentence, float(row["eta2_partial"])),
             "apa_parts": apa_parts(sentence, float(row["eta2_partial"])),
             "apa_md": apa_sentence(sentence, float(row["eta2_partial"]), "md"),

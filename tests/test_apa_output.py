@@ -112,7 +112,7 @@ def test_apa_sentence_uses_corrected_df(exp1):
     row = exp1.effect("BODY:SEX")
     rep = reported_statistics(row, "gg", "spss", exp1.alpha)
     sentence = apa_sentence({"F": row["F"], **rep}, row["eta2_partial"], "md")
-    assert f"- BODY*SEX: {sentence}" in md
+    assert f"- BODY × SEX: {sentence}" in md
     assert sentence.startswith(f"*F*({rep['df1']:.2f}, {rep['df2']:.1f}) = {row['F']:.2f}, *p* < .001, ηp² = .")
     assert "APA-style report (Greenhouse–Geisser corrected):" in md
     gait = apa_sentence({"F": 33.76, "df1": 1.0, "df2": 14.0, "p": 4.5e-5}, 0.7069)
