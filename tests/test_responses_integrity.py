@@ -320,3 +320,23 @@ def test_a_huge_cell_is_cut_in_the_error_message(likert, tmp_path):
     with pytest.raises(AnalysisError) as err:
         import_responses(_write(tmp_path / "long.csv", rows), likert[0])
     assert "(100,000 characters)" in str(err.value) and len(str(err.value)) < 1000
+
+
+def test_analyze_reports_the_answers_excluded_one_by_one(likert, tmp_path, run_cli):
+    """The printed counts, summary.json, exclusions.csv and report.html agree on the single answers left out."""
+    rows = _export(likert, "qualtrics-numeric")
+    for value, record in zip(["6", "0"], rows[3:5]):
+        record[_answered_columns(rows, record, test_only=True)[0]] = value
+    path = _write(tmp_path / "q.csv", rows)
+    code, out, err = run_cli("analyze", DATA / "mini_likert", "--responses", path, "--out", tmp_path / "report",
+                             "--no-models")
+    assert code == 0, err
+    assert "6 rows: 6 imported, 0 excluded" in _said(out)
+    assert "answers excluded one by one (the rest of their row imported): 2 (answer outside the scale: 2)" in _said(out)
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())["import"]
+    assert (summary["excluded_answers"], summary["participants"]) == (2, 6)
+    excluded = pd.read_csv(tmp_path / "report" / "exclusions.csv", dtype=str, keep_default_na=False)
+    assert excluded[["row", "scope", "reason"]].values.tolist() == [["4", "answer", "answer outside the scale"],
+                                                                   ["5", "answer", "answer outside the scale"]]
+    html = (tmp_path / "report" / "report.html").read_text(encoding="utf-8")
+    assert "2 single answers were excluded one by one" in _said(html)
