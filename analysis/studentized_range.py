@@ -99,7 +99,7 @@ def studentized_range_sf(q, k: int, df, chunk: int = 1024) -> np.ndarray:
     return out
 
 
-_MANY_DF = 16   # up to this many distinct df, each gets its own grid
+_MANY_DF = 2   # up to this many distinct df, each gets its own grid; more share one grid per octave
 
 
 def _sf_one_df(qp: np.ndarray, k: int, df: float, chunk: int) -> np.ndarray:
@@ -172,7 +172,8 @@ def studentized_range_isf(p, k: int, df, tol: float = 1e-12) -> np.ndarray:
         same = np.sign(fx) == np.sign(fb)
         fa = np.where(same, fa / 2, fb)   # Illinois: halve the stale end's value
         a = np.where(same, a, b)
+        step = np.abs(x - b)
         b, fb = x, fx
-        if np.all(np.abs(b - a) < tol):
+        if np.all((step < tol) | (fb == 0)):   # the bracket need not shrink; the iterates do
             break
     return np.exp(b).reshape(shape)

@@ -177,6 +177,17 @@ def effect_statistics(row, reported: dict, noise: float, style: str = "paper") -
     return shown | {"F": format_num(row["F"]), "eta2": unit(row["eta2_partial"]), "nc": format_num(reported["nc"])}
 
 
+def posthoc_header(table: AnovaTable) -> str:
+    """The post-hoc column's header says how its pairs were tested: ``post-hoc (Tukey, univariate, emmeans
+    means)``; under the statistica convention with a mixed effect it adds that pairs across between groups
+    are not protected there."""
+    results = list(table.posthoc.values())
+    text = "post-hoc (" + " / ".join(dict.fromkeys(ph.label for ph in results))
+    if any(ph.unprotected for ph in results):
+        text += "; pairs across between groups not protected"
+    return text + ")"
+
+
 def posthoc_text(ph, testable: bool) -> str:
     """The post-hoc cell: the paper's summary, ``n.s.`` when Tukey found no pair, ``—`` for an untested effect
     (its F is 0/0, or Tukey found its error term without variance)."""
@@ -285,6 +296,7 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
         sentence = {"F": float(row["F"]), **rep}
         sections.setdefault(int(row["order"]), []).append({
             "effect": sep.join(row["factors"]),
+            "label": " × ".join(row["factors"]),   # the APA sentences' name of the effect
             "name": name,
             "factors": list(row["factors"]),
             "ss": format_ss(row["ss"], noise),
@@ -296,7 +308,6 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
             "numbers": [None if math.isnan(float(row[c])) else float(row[c]) for c in EFFECT_COLUMNS],
             "p_reported": _finite_or_none(p),   # blank in CSV, as the other undefined numbers
             "reported": [rep["df1"], rep["df2"], _finite_or_none(rep["nc"]), _finite_or_none(rep["power"])],
-            "label": " × ".join(row["factors"]),   # the APA sentences' name of the effect
             "apa": apa_sentence(sentence, float(row["eta2_partial"])),
             "apa_parts": apa_parts(sentence, float(row["eta2_partial"])),
             "apa_md": apa_sentence(sentence, float(row["eta2_partial"]), "md"),
@@ -314,7 +325,8 @@ def table_context(table: AnovaTable, all_rows: bool = False, correction: str = "
                            "raw": {"ss": float(s["ss"]), "df": float(s["df"]),
                                                               "ms": float(s["ms"])}})
     show_posthoc = bool(table.posthoc)
-    headers = list(HEADERS) + (["ε"] if correction != "none" else []) + (["post-hoc (Tukey)"] if show_posthoc else [])
+    headers = (list(HEADERS) + (["ε"] if correction != "none" else [])
+               + ([posthoc_header(table)] if show_posthoc else []))
     return {
         "caption": caption if caption is not None else default_caption(table, all_rows, a, correction,
                                                                         corrected_power) + (

@@ -102,5 +102,6 @@ def critical_value(df: np.ndarray, adjust: str, k: int, level: float = 0.95) -> 
     elif adjust in ("bonferroni", "holm"):
         out[ok] = special.stdtrit(df[ok], 1.0 - alpha / (2 * m))
     else:
-        out[ok] = studentized_range_isf(alpha, k, df[ok]) / np.sqrt(2.0)
+        values, where = np.unique(df[ok], return_inverse=True)   # one quantile per distinct df
+        out[ok] = (studentized_range_isf(alpha, k, values) / np.sqrt(2.0))[where.ravel()]
     return out

@@ -25,6 +25,9 @@ from analysis.posthoc.pairs import check_followup, effect_sizes, plan_pairs
 from analysis.posthoc.summary import cell_labels, summarize
 
 ADJUST_NAMES = {"tukey": "Tukey", "holm": "Holm", "bonferroni": "Bonferroni", "none": "unadjusted"}
+MULTIVARIATE_TUKEY_NOTE = ("Tukey on the multivariate model gives each pair its own variance estimate, which the "
+                           "studentized range does not allow for: liberal for larger repeated-measures families "
+                           "(FWER ~.08 for 12 within cells, benchmarks/posthoc_fwer.py); holm or bonferroni keep it")
 STATISTICA_NOTE = ("statistica convention: pairs that differ in a between-subjects factor are tested against the "
                    "effect's within-subject error, so they are not protected (anti-conservative)")
 
@@ -84,6 +87,8 @@ class PosthocResult:
     def method(self) -> str:
         """``"Tukey, univariate follow-up, emmeans means"`` (with the statistica warning where it applies)."""
         text = f"{ADJUST_NAMES[self.adjust]}, {self.followup} follow-up, {self.means_type} means"
+        if self.followup == "multivariate" and self.adjust == "tukey" and self.k > 2:
+            text += f"; {MULTIVARIATE_TUKEY_NOTE}"
         return text + (f"; {STATISTICA_NOTE}" if self.unprotected else "")
 
     def records(self) -> list[dict]:

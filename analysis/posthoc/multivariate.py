@@ -17,7 +17,7 @@ def multivariate_weights(L: np.ndarray, n_g: np.ndarray) -> np.ndarray:
     >>> multivariate_weights(np.array([[[1.0, -1.0]]]), np.array([5])).round(2).tolist()
     [[0.2, -0.2, -0.2, 0.2]]
     """
-    B = np.einsum("pgi,pgj,g->pij", L, L, 1.0 / n_g)
+    B = np.matmul(np.swapaxes(L / n_g[None, :, None], 1, 2), L)
     return B.reshape(len(L), -1)
 
 

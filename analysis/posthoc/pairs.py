@@ -76,7 +76,8 @@ class PairPlan:
         covariance (…, cells, cells). ``Y``: subjects × cells, or data sets × subjects × cells."""
         Y = np.asarray(Y, dtype=float)
         M = group_means(Y, self.code, self.n_g)
-        means = np.einsum("egk,...gk->...e", self.cells.weights, M)
+        W = self.cells.weights
+        means = M.reshape(M.shape[:-2] + (-1,)) @ W.reshape(len(W), -1).T
         diff = means[..., self.i] - means[..., self.j]
         cov = pooled_covariance(Y, self.code, self.n_g)
         if self.followup == "multivariate":
@@ -130,9 +131,9 @@ def effect_sizes(plan: PairPlan, diff: np.ndarray, cov: np.ndarray) -> tuple[np.
       for a between pair both are the same score), J = 1 − 3 / (4·df − 1), df = n − groups.
     """
     w = plan.cells.within_weights
-    var_cell = np.einsum("ek,kl,el->e", w, cov, w)
+    var_cell = ((w @ cov) * w).sum(axis=1)
     delta = w[plan.i] - w[plan.j]
-    var_diff = np.einsum("pk,kl,pl->p", delta, cov, delta)
+    var_diff = ((delta @ cov) * delta).sum(axis=1)
     j_corr = 1.0 - 3.0 / (4.0 * plan.df_error - 1.0)
     within = plan.kind == "within"
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -42,7 +42,7 @@ def stratum_mse(cov: np.ndarray, wk: tuple[int, ...]) -> np.ndarray:
     """Error mean square of every stratum from the pooled within-group covariance (…, cells, cells):
     ``MSE_S = trace(C_S' Σ C_S) / d_S`` — the ANOVA's ``strata.ms``."""
     C, slices = within_contrasts(tuple(wk))
-    diag = np.einsum("...ij,ik,jk->...k", cov, C, C)
+    diag = (np.matmul(cov, C) * C).sum(axis=-2)       # diag(C' Σ C)
     return np.stack([diag[..., sl].mean(axis=-1) for sl in slices], axis=-1)
 
 
