@@ -53,6 +53,10 @@ def test_exp1_report_files_tables_and_recovered_effects(reports):
     significant = summary["sections"][0]["results"]["significant"]
     assert {"BODY", "BODY:SEX"} <= set(significant)
     assert "Tukey" in (report / "anova.md").read_text() and "\\toprule" in (report / "anova.tex").read_text()
+    # the protocol's `posthoc: tukey` now means emmeans' univariate rule (issue 19), and the tables say so
+    assert "post-hoc (Tukey, univariate, emmeans means)" in (report / "anova.md").read_text()
+    method = summary["sections"][0]["results"]["posthoc_method"]["BODY:SEX"]
+    assert method.startswith("Tukey, univariate follow-up, emmeans means")
     models = pd.read_csv(report / "additional_models.csv")
     lmm = "linear mixed model (REML, Satterthwaite F tests, as lmerTest)"
     assert set(models["model"]) == {lmm, "cumulative link mixed model (Laplace, as ordinal::clmm)"}
