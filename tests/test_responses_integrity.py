@@ -13,6 +13,8 @@ import io
 import json
 import os
 import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -277,8 +279,13 @@ def _alarm(seconds: int):
 
 def test_non_regular_files_are_refused_before_reading(likert, tmp_path, run_cli):
     """/dev/zero gave a MemoryError traceback; a FIFO hung the import."""
-    with pytest.raises(AnalysisError, match=r"/dev/zero: not a regular file \(a character device\)"):
-        import_responses("/dev/zero", likert[0])
+    # in a child process whose memory is capped: a regression fails fast instead of filling this machine's memory
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (1 << 31, 1 << 31));"
+            "from stimuli.cli import main; sys.exit(main(['responses', 'inspect', '/dev/zero']))")
+    child = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                           cwd=Path(__file__).resolve().parents[1])
+    assert child.returncode == 2 and "Traceback" not in child.stderr
+    assert "/dev/zero: not a regular file (a character device)" in _said(child.stderr)
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)
     _alarm(10)
