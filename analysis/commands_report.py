@@ -193,6 +193,9 @@ def run_analyze(args) -> int:
     from analysis.report import analyze
     summary = analyze(args.dir, args.responses, args.out, models=not args.no_models)
     imp = summary["import"]
+    if summary.get("simulated"):
+        print("SIMULATED DATA: the responses were written by shapemotion simulate (column shapemotion_simulated); "
+              "the report and tables say so at the top")
     print(f"{imp['rows']} rows: {imp['imported_rows']} imported, {imp['excluded_rows']} excluded "
           f"({', '.join(f'{k}: {v}' for k, v in imp['excluded_by_reason'].items()) or 'none'}); "
           f"{imp['participants']} participants")

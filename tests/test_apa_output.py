@@ -251,7 +251,7 @@ def test_simulated_marker_survives_every_export_and_import(onewithin_design, fmt
                                   imported.data.drop(columns=["row"], errors="ignore"))
 
 
-def test_report_of_simulated_responses_says_so_at_the_top(onewithin_design, tmp_path):
+def test_report_of_simulated_responses_says_so_at_the_top(onewithin_design, tmp_path, run_cli):
     from analysis.io_writers import export_text
     from analysis.model_spec import load_model
     from analysis.report import analyze
@@ -275,3 +275,8 @@ def test_report_of_simulated_responses_says_so_at_the_top(onewithin_design, tmp_
     assert summary["simulated"] is False
     assert "SIMULATED" not in (tmp_path / "report2" / "report.html").read_text(encoding="utf-8")
     assert "SIMULATED" not in (tmp_path / "report2" / "anova.md").read_text()
+    for name, says in (("sim.csv", True), ("real.csv", False)):   # and the terminal says it too
+        code, out, err = run_cli("analyze", design.directory, "--responses", tmp_path / name, "--out",
+                                 tmp_path / f"cli_{name}", "--no-models")
+        assert code == 0, err
+        assert ("SIMULATED DATA" in out) is says
