@@ -41,7 +41,8 @@ def run(sims: int, seed: int, cell_sd) -> tuple[object, float]:
 
 def markdown(out) -> str:
     """One row per effect × family, one column per follow-up × adjustment: FWER [95 % CI]."""
-    cols = [(f, a) for f in ("univariate", "multivariate", "statistica") for a in ("tukey", "holm", "bonferroni", "none")]
+    cols = [(f, a) for f in ("univariate", "multivariate", "statistica")
+            for a in ("tukey", "holm", "bonferroni", "none")]
     lines = ["| effect | family | pairs | " + " | ".join(f"{f} {a}" for f, a in cols) + " |",
              "|---|---|---:|" + "---:|" * len(cols)]
     for (effect, family), g in out.groupby(["effect", "family"], sort=False):

@@ -20,7 +20,6 @@ import pandas as pd
 from analysis.anova import AnovaTable, anova
 from analysis.errors import AnalysisError
 from analysis.posthoc.adjust import adjust_p, check_adjust, critical_value
-from analysis.posthoc.means import MEANS_TYPES
 from analysis.posthoc.pairs import check_followup, effect_sizes, plan_pairs
 from analysis.posthoc.summary import cell_labels, summarize
 
@@ -144,9 +143,7 @@ def posthoc(
     table = _table(table_or_data, anova_kwargs)
     followup = check_followup(followup)
     adjust = check_adjust(adjust)
-    means = default_means(followup) if means is None else str(means).lower()
-    if means not in MEANS_TYPES:
-        raise AnalysisError(f"unknown means type {means!r}; use {' or '.join(MEANS_TYPES)}")
+    means = default_means(followup) if means is None else str(means).lower()   # checked by effect_cells
     name = table.effect_name(effect)
     a = table.alpha if alpha is None else float(alpha)
     row = table.effects.loc[name]
