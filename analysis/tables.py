@@ -75,7 +75,11 @@ def format_p_apa(p: float) -> str:
 
 
 def format_unit_apa(x: float, digits: int = 2) -> str:
-    """A number that cannot exceed 1 (η², power) without its leading zero, as APA asks: ``.23``, ``1.00``."""
+    """A number that cannot exceed 1 (η², power) without its leading zero, as APA asks.
+
+    >>> format_unit_apa(0.2291), format_unit_apa(0.99971), format_unit_apa(0.004)
+    ('.23', '1.00', '.00')
+    """
     if x is None or math.isnan(x):
         return ""
     text = f"{x:.{digits}f}"
@@ -83,8 +87,11 @@ def format_unit_apa(x: float, digits: int = 2) -> str:
 
 
 def format_df_apa(x: float) -> str:
-    """Degrees of freedom in a sentence: whole numbers as such, corrected ones to 3 significant digits
-    (``1.84``, ``25.8``, ``126``)."""
+    """Degrees of freedom in a sentence: whole numbers as such, corrected ones to 3 significant digits.
+
+    >>> [format_df_apa(x) for x in (14.0, 1.8412, 25.78, 125.6)]
+    ['14', '1.84', '25.8', '126']
+    """
     if float(x).is_integer():
         return f"{x:.0f}"
     return f"{x:.2f}" if x < 10 else f"{x:.1f}" if x < 100 else f"{x:.0f}"
