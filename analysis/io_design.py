@@ -164,6 +164,8 @@ def design_from_parts(meta: dict, conditions: pd.DataFrame, trials: pd.DataFrame
     if rtype not in MEASURES_OF_TYPE:
         raise AnalysisError(f"{where}: response.type must be likert, afc or ranking, got {rtype!r}")
     labels = [str(x) for x in response.get("labels") or []]
+    _check_labels(labels, "response.labels", where)
+    _check_labels([str(x) for x in response.get("position_labels") or []], "response.position_labels", where)
     analysis = _mapping(protocol, "analysis", where, "protocol.")
     measure, measure_source = _measure(meta, analysis, rtype, where)
     chosen = meta.get("chosen_factor") or next((f.name for f in factors if f.role == "alternatives"), None)
@@ -223,6 +225,23 @@ def _measure(meta: dict, analysis: dict, rtype: str, where: Path) -> tuple[str, 
                             f"{' or '.join(allowed)}; fix the protocol's analysis.dependent_measure and run "
                             f"`shapemotion design` again")
     return measure, field_name
+
+
+def _check_labels(labels: list[str], field: str, where: Path) -> None:
+    """Answers are matched to labels ignoring case and spacing: a blank or repeated label (a design.json
+    from another tool; the protocol loader refuses them too) would read some answers as others."""
+    from analysis.responses.scoring import _norm   # the readers' own matching
+
+    seen: dict[str, int] = {}
+    for index, label in enumerate(labels):
+        if not label.strip():
+            raise AnalysisError(f"{where}: {field}.{index}: label {index + 1} is blank; every answer needs a label")
+        if _norm(label) in seen:
+            first = seen[_norm(label)]
+            raise AnalysisError(f"{where}: {field}.{index}: label {index + 1} {label[:60]!r} repeats label "
+                                f"{first + 1} ({labels[first][:60]!r}); answers are matched to labels ignoring case "
+                                "and spacing, so every answer needs a label of its own")
+        seen[_norm(label)] = index
 
 
 def _factor(raw: dict, where: Path) -> FactorInfo:

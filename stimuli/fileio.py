@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import csv
 import io
 import os
@@ -54,6 +55,19 @@ def write_all_or_nothing(out_dir: str | Path, files: dict[str, str]) -> list[Pat
         atomic_write_text(out_dir / name, text)
         written.append(out_dir / name)
     return written
+
+
+def output_path(text: str) -> Path:
+    """An ``argparse`` type for output paths: ``Path("")`` is ``.``, so an empty ``--out ""`` (an unset
+    shell variable) wrote into the current folder; it is refused instead (argparse: exit 2).
+
+    >>> output_path("out/design")
+    PosixPath('out/design')
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"an empty path ({text!r}) would write into the current folder; "
+                                         "give a file or folder name (. for the current folder)")
+    return Path(text)
 
 
 def check_output_file(path: str | Path | None, option: str = "--out") -> Path | None:

@@ -1,8 +1,9 @@
 """Protocol files: the researcher's description of an experiment, validated with pydantic.
 
-A protocol is YAML (read with ``yaml.safe_load``). :func:`load_protocol` turns it into a
-:class:`Protocol`, or raises :class:`~stimuli.errors.StimuliError` with one paragraph naming the
-file, the field, the YAML line and what was expected.
+A protocol is YAML, read by a safe loader with limits (:data:`MAX_PROTOCOL_BYTES` of file, aliases
+expanding to at most :data:`MAX_EXPANDED_SIZE`, :data:`MAX_NESTING` levels). :func:`load_protocol`
+turns it into a :class:`Protocol`, or raises :class:`~stimuli.errors.StimuliError` with one short
+paragraph naming the file, the field, the YAML line and what was expected.
 
 >>> from stimuli.protocol import load_protocol
 >>> p = load_protocol("protocols/exp1_shape_motion.yaml")
@@ -17,6 +18,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import stat
 import types
 import typing
 from pathlib import Path
@@ -30,6 +32,8 @@ from stimuli.errors import StimuliError
 # What a factor's levels mean on screen.
 MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "parameter", "source", "view", "none"]
 SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+# Ids, labels, factor names and levels become parts of stimulus ids, file names and column headers.
+MAX_NAME_LENGTH = 40
 # The human ranges of a body (metres, kg/m²): the protocol's actors and the CLI's --height/--bmi/girths.
 HEIGHT_RANGE_M = (1.2, 2.3)
 # A gait's cadence (steps/min) and belt speed (m/s): the protocol's gaits, the generator's
@@ -83,7 +87,8 @@ class Actor(Strict):
     @classmethod
     def _safe(cls, value: str) -> str:
         if not SAFE_ID.match(value):
-            raise ValueError(f"{value!r} must use letters, digits, '_', '-', '.' or '+' only")
+            raise ValueError(f"{shown(value)} must use letters, digits, '_', '-', '.' or '+' only")
+        _check_name_length(value)
         return value
 
     @property
@@ -110,20 +115,24 @@ class Factor(Strict):
     @classmethod
     def _name(cls, value: str) -> str:
         if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", value):
-            raise ValueError(f"factor name {value!r} must start with a letter and use letters, digits or '_'")
+            raise ValueError(f"factor name {shown(value)} must start with a letter and use letters, digits or '_'")
+        _check_name_length(value)
         return value
 
     @model_validator(mode="after")
     def _levels_known(self) -> "Factor":
         if len(set(self.levels)) != len(self.levels):
-            raise ValueError(f"levels of {self.name} repeat: {self.levels}")
+            raise ValueError(f"levels of {self.name} repeat: {shown(self.levels)}")
         for level in self.levels:
             if not SAFE_ID.match(level):
-                raise ValueError(f"level {level!r} of {self.name} must use letters, digits, '_', '-', '.' or '+'")
+                raise ValueError(f"level {shown(level)} of {self.name} must use letters, digits, '_', '-', '.' or '+'")
+            _check_name_length(level)
+        _check_stimulus_id_parts(self)
         for where in (self.abbreviations, self.level_settings):
             unknown = sorted(set(where) - set(self.levels))
             if unknown:
-                raise ValueError(f"{unknown} are not levels of {self.name} (levels: {self.levels})")
+                raise ValueError(f"{shown(unknown)} are not levels of {self.name} (levels: {shown(self.levels)})")
+        _check_abbreviations(self)
         for level, settings in self.level_settings.items():
             for key, value in settings.items():
                 _check_level_setting(self, level, key, value)
@@ -135,10 +144,54 @@ class Factor(Strict):
         return self.abbreviations.get(level, level)
 
 
+def _check_name_length(name: str) -> None:
+    if len(name) > MAX_NAME_LENGTH:
+        raise ValueError(f"{shown(name)} is longer than {MAX_NAME_LENGTH} characters (ids, labels, factor names "
+                         "and levels become parts of stimulus ids, file names and column headers)")
+
+
+def _check_stimulus_id_parts(factor: "Factor") -> None:
+    """Two levels of one factor must not make the same stimulus id: ids keep letters, digits, ``_``,
+    ``.`` and ``+`` (``a-b`` and ``a_b`` both become ``a_b``), and a repeated id silently merged two
+    conditions' clips and answers."""
+    from stimuli.design import _safe   # the one spelling of ids (stimuli.design)
+
+    seen: dict[str, str] = {}
+    for level in factor.levels:
+        part = _safe(level)
+        if part in seen:
+            raise ValueError(f"levels: {factor.name} levels {seen[part]!r} and {level!r} make the same stimulus id "
+                             f"{part!r} (a '-' becomes '_'); rename one of them")
+        seen[part] = level
+
+
+def _check_abbreviations(factor: "Factor") -> None:
+    """What tables and figures show for each level (its abbreviation, else its name) must tell the levels
+    apart: a blank, a repeated abbreviation or one that is another level's name would label two cells
+    alike or one cell as another.
+
+    >>> _check_abbreviations(Factor(name="GAIT", role="within", levels=["walk", "jog"]))
+    """
+    shown_as: dict[str, str] = {}
+    for level in factor.levels:
+        abbreviation = factor.abbreviations.get(level)
+        if abbreviation is not None and not abbreviation.strip():
+            raise ValueError(f"abbreviations: the abbreviation of {level!r} is blank; give it some text, or leave "
+                             f"{level!r} out of abbreviations (it is then shown by its name)")
+        if abbreviation is not None and abbreviation != level and abbreviation.strip() in factor.levels:
+            raise ValueError(f"abbreviations: {level!r} is abbreviated {shown(abbreviation)}, the name of another "
+                             f"{factor.name} level; tables and figures would show one level as the other")
+        text = factor.abbreviation(level).strip()
+        if text in shown_as:
+            raise ValueError(f"abbreviations: {factor.name} levels {shown_as[text]!r} and {level!r} are both shown "
+                             f"as {shown(text)}; give each level an abbreviation of its own")
+        shown_as[text] = level
+
+
 def _check_level_setting(factor: "Factor", level: str, key: str, value) -> None:
     """One ``level_settings`` entry, checked as the renderer will read it (a typo fails here, not
     half-way through a render)."""
-    where = f"level_settings.{level}.{key}"
+    where = f"level_settings.{level}.{_key_text(key)}"
     if key not in LEVEL_SETTINGS:
         raise ValueError(f"{where}: unknown setting (known: {', '.join(LEVEL_SETTINGS)})")
     owners = LEVEL_SETTINGS[key]
@@ -147,24 +200,24 @@ def _check_level_setting(factor: "Factor", level: str, key: str, value) -> None:
                          f"maps to {factor.maps_to})")
     if key == "view_deg":
         if isinstance(value, str) or not -360.0 <= value <= 360.0:
-            raise ValueError(f"{where}: expected a view angle in degrees between -360 and 360, got {value!r}")
+            raise ValueError(f"{where}: expected a view angle in degrees between -360 and 360, got {shown(value)}")
     elif key == "base_scale":
         if isinstance(value, str) or not value > 0:
-            raise ValueError(f"{where}: expected a number > 0, got {value!r}")
+            raise ValueError(f"{where}: expected a number > 0, got {shown(value)}")
     elif key == "motion" and factor.maps_to == "method":
         if value not in METHOD_MOTIONS:
-            raise ValueError(f"{where}: expected one of {', '.join(METHOD_MOTIONS)}, got {value!r}")
+            raise ValueError(f"{where}: expected one of {', '.join(METHOD_MOTIONS)}, got {shown(value)}")
     elif key == "motion":
         if not isinstance(value, str) or not (value in SOURCE_MOTIONS or value.startswith("bvh:")
                                               and value[4:].strip()):
-            raise ValueError(f"{where}: expected one of {', '.join(SOURCE_MOTIONS)} or bvh:<path>, got {value!r}")
+            raise ValueError(f"{where}: expected one of {', '.join(SOURCE_MOTIONS)} or bvh:<path>, got {shown(value)}")
     elif key == "modifies":
         from stimuli.motion.modifier import STRENGTH_ROWS
 
         names = [n.strip() for n in str(value).split("+")]
         unknown = [n for n in names if n not in STRENGTH_ROWS]
         if unknown:
-            raise ValueError(f"{where}: unknown Table 4-1/5-2 row(s) {unknown}; expected names joined by '+' "
+            raise ValueError(f"{where}: unknown Table 4-1/5-2 row(s) {shown(unknown)}; expected names joined by '+' "
                              f"from: {', '.join(STRENGTH_ROWS)}")
 
 
@@ -179,7 +232,7 @@ def _check_strength_levels(factor: "Factor") -> None:
         except ValueError:
             ok = False
         if not ok:
-            raise ValueError(f"levels: {factor.name} maps to strength, so level {level!r} must be a body-fat % "
+            raise ValueError(f"levels: {factor.name} maps to strength, so level {shown(level)} must be a body-fat % "
                              f"between {low:g} and {high:g}")
 
 
@@ -222,7 +275,7 @@ class ClipSettings(Strict):
     @classmethod
     def _colour(cls, value: str) -> str:
         if not HEX_COLOUR.match(value.strip()):
-            raise ValueError(f"expected a colour like '#ffffff' (#rrggbb), got {value!r}")
+            raise ValueError(f"expected a colour like '#ffffff' (#rrggbb), got {shown(value)}")
         return value
 
 
@@ -240,6 +293,11 @@ class Display(Strict):
     label_position: Literal["above", "below"] | None = Field(default=None, description="labels above (default) or below")
     label_colour: str | None = Field(default=None, pattern=r"^#[0-9a-fA-F]{6}$",
                                      description="#rrggbb (default: black or white against the background)")
+
+    @model_validator(mode="after")
+    def _labels_tell_positions_apart(self):
+        check_distinct_labels(self.labels or [], "labels", "every screen position")
+        return self
 
     @model_validator(mode="after")
     def _floor_is_for_meshes(self):
@@ -330,7 +388,32 @@ class Response(Strict):
     def _labels(self) -> "Response":
         if self.type == "likert" and len(self.labels) < 2:
             raise ValueError("a likert response needs at least 2 labels (e.g. 'Very Inconsistent' … 'Very Consistent')")
+        check_distinct_labels(self.labels, "labels", "every point of the scale")
         return self
+
+
+def check_distinct_labels(labels: list[str], field: str, who: str) -> None:
+    """Labels that answers are matched to must tell the answers apart: none blank, none repeated once
+    case and spacing are ignored (as :mod:`analysis.responses.scoring` matches them). A repeated Likert
+    label silently moved every answer of the second to the first (ratings 2, 3, 5 only).
+
+    >>> check_distinct_labels(["Disagree", "Neutral", "agree "], "labels", "every point of the scale")
+    >>> check_distinct_labels(["Agree", " agree"], "labels", "every point of the scale")
+    Traceback (most recent call last):
+    ...
+    ValueError: labels.1: label 2 ' agree' repeats label 1 ('Agree'); answers are matched to labels ignoring case and spacing, so every point of the scale needs a label of its own
+    """
+    seen: dict[str, int] = {}
+    for index, label in enumerate(labels):
+        if not label.strip():
+            raise ValueError(f"{field}.{index}: label {index + 1} is blank; {who} needs a label to show and to "
+                             "read answers by")
+        key = " ".join(label.split()).casefold()
+        if key in seen:
+            raise ValueError(f"{field}.{index}: label {index + 1} {shown(label)} repeats label {seen[key] + 1} "
+                             f"({shown(labels[seen[key]])}); answers are matched to labels ignoring case and "
+                             f"spacing, so {who} needs a label of its own")
+        seen[key] = index
 
 
 class Assignment(Strict):
@@ -421,7 +504,7 @@ def check_consistency(p: Protocol) -> None:
     """Cross-field rules pydantic cannot express per field. Raises ValueError naming the field."""
     names = [f.name for f in p.factors]
     if len(set(names)) != len(names):
-        raise ValueError(f"factors: names repeat: {names}")
+        raise ValueError(f"factors: names repeat: {shown(names)}")
     ids = [a.id for a in p.actors]
     if len(set(ids)) != len(ids):
         raise ValueError(f"actors: ids repeat: {sorted(i for i in ids if ids.count(i) > 1)}")
@@ -437,9 +520,11 @@ def check_consistency(p: Protocol) -> None:
         raise ValueError("response.type: 'afc' needs a factor with role 'alternatives' (the choices)")
     if p.response.type == "ranking" and not alternatives:
         raise ValueError("response.type: 'ranking' needs a factor with role 'alternatives' (what is ranked)")
+    _check_actor_labels(p)
+    _check_arrangement_ids(p)
     for name in p.blocks.by:
         if name not in names:
-            raise ValueError(f"blocks.by: unknown factor {name!r} (factors: {names})")
+            raise ValueError(f"blocks.by: unknown factor {shown(name)} (factors: {shown(names)})")
         if p.factor(name).role != "within":
             raise ValueError(f"blocks.by: {name} is a {p.factor(name).role} factor; blocks must be within factors")
     if p.blocks.nested and len(p.blocks.by) < 2:
@@ -463,6 +548,43 @@ def check_consistency(p: Protocol) -> None:
             f"groups; use a multiple of {between_cells}")
 
 
+def _check_actor_labels(p: Protocol) -> None:
+    """A BODY or MOTION level names an actor by label, and by sex when a factor maps to sex: two actors
+    one level would name left the design to fail on a look-up (``KeyError: 'F/Hi1'``)."""
+    if p.factor_mapped_to("body") is None and p.factor_mapped_to("motion") is None:
+        return
+    by_sex = p.factor_mapped_to("sex") is not None
+    seen: dict[tuple, int] = {}
+    for index, actor in enumerate(p.actors):
+        key = (actor.sex if by_sex else None, actor.label)
+        if key in seen:
+            first = p.actors[seen[key]].id
+            what = (f"are both sex {actor.sex} with label {actor.label!r}; a level names one actor of each sex"
+                    if by_sex else f"share label {actor.label!r} and no factor maps to sex, so a level names one "
+                    "actor whatever the sex")
+            raise ValueError(f"actors.{index}.label: {first} and {actor.id} {what}: give each its own label")
+        seen[key] = index
+
+
+def _check_arrangement_ids(p: Protocol) -> None:
+    """Screen orders of the alternatives are joined by ``_`` into stimulus ids: levels that hold ``_``
+    (or ``-``) could make two orders one id (``a``, ``b_c`` and ``a_b``, ``c``)."""
+    alternatives = p.factors_with_role("alternatives")
+    if not alternatives or not any(set("_-") & set(level) for level in alternatives[0].levels):
+        return
+    from stimuli.design import _safe
+    from stimuli.orders import arrangements
+
+    seen: dict[str, tuple[str, ...]] = {}
+    for arrangement in arrangements(p):
+        text = "_".join(_safe(level) for level in arrangement)
+        if text in seen:
+            raise ValueError(f"factors.{alternatives[0].name}.levels: the screen orders {' '.join(seen[text])} and "
+                             f"{' '.join(arrangement)} make the same stimulus id part {text!r}; rename levels so "
+                             "that they hold no '_' or '-'")
+        seen[text] = tuple(arrangement)
+
+
 def _check_practice(p: Protocol, names: list[str]) -> None:
     """practice.levels, whatever per_block is: practice-only levels of within factors that do not
     define blocks (a practice trial keeps its block's and between group's levels, so practice levels
@@ -470,7 +592,7 @@ def _check_practice(p: Protocol, names: list[str]) -> None:
     for name, levels in p.practice.levels.items():
         where = f"practice.levels.{name}"
         if name not in names:
-            raise ValueError(f"practice.levels: unknown factor {name!r} (factors: {names})")
+            raise ValueError(f"practice.levels: unknown factor {shown(name)} (factors: {shown(names)})")
         factor = p.factor(name)
         if factor.role != "within" or name in p.blocks.by:
             what = ("defines the blocks (blocks.by)" if factor.role == "within"
@@ -484,13 +606,18 @@ def _check_practice(p: Protocol, names: list[str]) -> None:
                              f"leave {name} out of practice.levels")
         repeated = sorted({level for level in levels if levels.count(level) > 1})
         if repeated:
-            raise ValueError(f"{where}: levels repeat: {repeated} (each practice level is one set of clips)")
+            raise ValueError(f"{where}: levels repeat: {shown(repeated)} (each practice level is one set of clips)")
         unsafe = [level for level in levels if not SAFE_ID.match(level)]
         if unsafe:
-            raise ValueError(f"{where}: level {unsafe[0]!r} must use letters, digits, '_', '-', '.' or '+'")
+            raise ValueError(f"{where}: level {shown(unsafe[0])} must use letters, digits, '_', '-', '.' or '+'")
+        for level in levels:
+            try:
+                _check_name_length(level)
+            except ValueError as exc:
+                raise ValueError(f"{where}: {exc}") from None
         clash = sorted(set(levels) & set(factor.levels))
         if clash:
-            raise ValueError(f"{where}: {clash} are test levels; practice must use other levels")
+            raise ValueError(f"{where}: {shown(clash)} are test levels; practice must use other levels")
     if p.practice.per_block and not p.practice.levels:
         raise ValueError("practice.per_block > 0 needs practice.levels (the practice-only levels to show)")
 
@@ -647,7 +774,8 @@ def _check_clip_timing(p: Protocol) -> None:
 def _check_screen_mapping(p: Protocol) -> None:
     """Levels that name actors or gaits must exist, so that every stimulus can be made."""
     if p.display.body is not None and p.display.body not in {a.id for a in p.actors}:
-        raise ValueError(f"display.body: {p.display.body!r} is not an actor id (actors: {[a.id for a in p.actors]})")
+        raise ValueError(f"display.body: {shown(p.display.body)} is not an actor id (actors: "
+                         f"{shown([a.id for a in p.actors])})")
     if p.display.body is None and p.factor_mapped_to("body") is None:
         raise ValueError("display.body: no factor maps to body, so display.body must name the actor whose body is shown")
     labels = p.display.labels
@@ -669,35 +797,93 @@ def _check_screen_mapping(p: Protocol) -> None:
         if f.maps_to == "sex":
             bad = sorted(set(f.levels + practice) - {"F", "M"})
             if bad:
-                raise ValueError(f"factors.{f.name}: sex levels must be F or M, got {bad}")
+                raise ValueError(f"factors.{f.name}: sex levels must be F or M, got {shown(bad)}")
         if f.maps_to == "parameter" and p.factor_mapped_to("strength") is not None:
             # The renderer exaggerates, per parameter level, the Table 4-1/5-2 rows its setting names.
             bare = [level for level in f.levels if not f.level_settings.get(level, {}).get("modifies")]
             if bare:
-                raise ValueError(f"factors.{f.name}: levels {bare} need level_settings.<level>.modifies: Table "
+                raise ValueError(f"factors.{f.name}: levels {shown(bare)} need level_settings.<level>.modifies: Table "
                                  "4-1/5-2 rows joined by '+' (e.g. \"arm_abduction+arm_bob\")")
         if f.maps_to == "gait":
             missing = sorted(set(f.levels + practice) - set(p.gaits))
             if missing:
-                raise ValueError(f"factors.{f.name}: gait levels {missing} are not declared under gaits")
+                raise ValueError(f"factors.{f.name}: gait levels {shown(missing)} are not declared under gaits")
 
 
 # -- loading ------------------------------------------------------------------------------------
 
+# Limits on what the loader reads, so that no file can take minutes or gigabytes (issue 26: a 4 KB
+# 'billion laughs' file ran past 120 s at 5.7 GB). The bundled protocols are 2–4 KB, under 300 nodes.
+MAX_PROTOCOL_BYTES = 1_048_576            # 1 MiB of file
+MAX_EXPANDED_SIZE = 2 * MAX_PROTOCOL_BYTES  # characters + nodes once every alias (*name) is expanded
+MAX_NODES = 20_000                        # values, keys, lists, mappings as written (the bundled ones: 144–343)
+MAX_NESTING = 50                          # lists and mappings inside each other (a protocol needs 5)
+MAX_PROBLEMS = 10                         # problems one error paragraph lists; the rest are counted
+SHOWN_CHARACTERS = 60                     # a value longer than this is named by its size in messages
+
+
 def load_protocol(path: str | Path) -> Protocol:
     """Read and validate a protocol file; every problem becomes a :class:`StimuliError`."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise StimuliError(f"{path}: protocol file not found") from None
-    except IsADirectoryError:
-        raise StimuliError(f"{path}: is a folder; expected a protocol YAML file") from None
-    except UnicodeDecodeError as exc:
-        raise StimuliError(f"{path}: cannot read the protocol as UTF-8 text ({exc})") from None
-    protocol = parse_protocol(text, source=str(path))
+    protocol = parse_protocol(read_protocol_text(path), source=str(path))
     protocol._folder = path.resolve().parent
     return protocol
+
+
+def read_protocol_text(path: Path) -> str:
+    """The text of a protocol file: a regular file (a FIFO would hang the reader, ``/dev/zero`` fill
+    memory) of at most :data:`MAX_PROTOCOL_BYTES`, UTF-8.
+
+    >>> len(read_protocol_text(Path("protocols/exp1_shape_motion.yaml"))) > 1000
+    True
+    """
+    try:
+        info = path.stat()
+        if stat.S_ISDIR(info.st_mode):
+            raise StimuliError(f"{path}: is a folder; expected a protocol YAML file")
+        if not stat.S_ISREG(info.st_mode):
+            raise StimuliError(f"{path}: is not a regular file (a device, pipe or socket); expected a protocol "
+                               "YAML file")
+        if info.st_size > MAX_PROTOCOL_BYTES:
+            raise StimuliError(_too_large(path, info.st_size))
+        with path.open("rb") as handle:
+            data = handle.read(MAX_PROTOCOL_BYTES + 1)   # + 1: a file that grew since stat() is still caught
+    except FileNotFoundError:
+        raise StimuliError(f"{path}: protocol file not found") from None
+    except OSError as exc:
+        raise StimuliError(f"{path}: cannot read the protocol ({exc.strerror or exc})") from None
+    if len(data) > MAX_PROTOCOL_BYTES:
+        raise StimuliError(_too_large(path, len(data)))
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise StimuliError(f"{path}: cannot read the protocol as UTF-8 text ({exc})") from None
+
+
+def _too_large(source: str | Path, size: int, unit: str = "bytes") -> str:
+    return (f"{source}: the protocol is {size:,} {unit}; a protocol file may hold at most "
+            f"{MAX_PROTOCOL_BYTES:,} (1 MiB)")
+
+
+def shown(value, limit: int = SHOWN_CHARACTERS) -> str:
+    """A value as messages echo it: its ``repr`` when short, else its size, so that a 1 MB value gives
+    a one-line message, not a 1 MB one.
+
+    >>> shown("Hi1"), shown("x" * 1_048_576), shown(list(range(1000)))
+    ("'Hi1'", '1,048,576 characters', 'a list of 1,000 items')
+    """
+    if isinstance(value, str) and len(value) > limit:
+        return f"{len(value):,} characters"
+    if isinstance(value, (list, tuple, set)) and len(value) > limit:   # repr of a huge list costs time too
+        return f"a list of {len(value):,} items"
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    if isinstance(value, dict):
+        return f"a mapping of {len(value):,} keys"
+    if isinstance(value, (list, tuple, set)):
+        return f"a list of {len(value):,} items"
+    return f"{len(text):,} characters"
 
 
 def capture_file(protocol: Protocol, spec: str) -> Path:
@@ -713,7 +899,7 @@ def check_capture_files(protocol: Protocol, path: str | Path) -> None:
     design written) before the captures are in place. The render names a missing one too.
     """
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    text = read_protocol_text(path)
     for f in protocol.factors:
         for level, settings in f.level_settings.items():
             spec = settings.get("motion")
@@ -722,16 +908,51 @@ def check_capture_files(protocol: Protocol, path: str | Path) -> None:
             capture = capture_file(protocol, spec)
             if not capture.is_file():
                 index = protocol.factors.index(f)
-                line = _line_of(yaml.compose(text), ["factors", index, "level_settings", level, "motion"])
+                line = _line_of(read_yaml(text, str(path))[1], ["factors", index, "level_settings", level, "motion"])
                 where = f" (line {line})" if line else ""
                 raise StimuliError(f"{path}: invalid protocol: factors.{index}.level_settings.{level}.motion{where}: "
                                    f"{capture} not found (a BVH capture; relative paths start from the protocol's "
                                    f"folder)")
 
 
-class UniqueKeyLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses a key given twice in one mapping: YAML itself keeps the last
-    one, so a second ``participants:`` line would silently override the first."""
+class YamlRefused(yaml.MarkedYAMLError):
+    """Well-formed YAML the loader will not read: over a limit, or a value PyYAML cannot build."""
+
+
+class ProtocolLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (YAML itself keeps the last
+    one, so a second ``participants:`` line would silently override the first), lists or mappings
+    nested deeper than :data:`MAX_NESTING` (PyYAML composes them recursively: 5,000 ``[`` were a
+    RecursionError) and more than :data:`MAX_NODES` nodes (pure-Python PyYAML reads ~25,000 nodes a
+    second: a 1 MiB list of one-letter items took 20 s; counting as it reads stops it early)."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+        self._nodes = 0
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        self._nodes += 1
+        try:
+            if self._nodes > MAX_NODES:
+                raise YamlRefused(None, None, f"more than {MAX_NODES:,} values, keys, lists and "
+                                                  "mappings; a protocol needs a few hundred",
+                                                  self.peek_event().start_mark)
+            if self._depth > MAX_NESTING:
+                raise YamlRefused(None, None, f"lists and mappings nested deeper than {MAX_NESTING} "
+                                                  "levels; a protocol needs a handful", self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_object(self, node, deep=False):
+        try:
+            return super().construct_object(node, deep=deep)
+        except (ValueError, OverflowError) as exc:
+            # SafeConstructor's own errors: a date that does not exist (!!timestamp 2001-13-45), an
+            # integer of more digits than Python reads (4,300)
+            raise YamlRefused(None, None, f"cannot read the value ({shown(str(exc), 120)})", node.start_mark) from None
 
     def construct_mapping(self, node, deep=False):
         seen: dict = {}
@@ -740,21 +961,91 @@ class UniqueKeyLoader(yaml.SafeLoader):
                 key = key_node.value
                 if key in seen:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"key {key!r} appears twice in one mapping (first on line {seen[key]})",
+                        None, None, f"key {shown(key)} appears twice in one mapping (first on line {seen[key]})",
                         key_node.start_mark)
                 seen[key] = key_node.start_mark.line + 1
         return super().construct_mapping(node, deep=deep)
 
 
-def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
+def read_yaml(text: str, source: str = "<protocol>") -> tuple[object, yaml.Node | None]:
+    """The data of a protocol's YAML and its node tree (for line numbers), checked against the limits
+    (size, nesting, alias expansion) before anything is built from the nodes. A YAML error becomes a
+    :class:`StimuliError` naming ``source`` and the line.
+
+    >>> read_yaml("name: x")[0]
+    {'name': 'x'}
+    """
+    if len(text) > MAX_PROTOCOL_BYTES:
+        raise StimuliError(_too_large(source, len(text), "characters"))
+    loader = ProtocolLoader(text)
     try:
-        data = yaml.load(text, Loader=UniqueKeyLoader)
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        root = loader.get_single_node()
+        if root is None:
+            return None, None
+        _check_expansion(root)
+        return loader.construct_document(root), root
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
-        raise StimuliError(f"{source}:{where}: YAML syntax error: {problem}") from None
+        if len(problem) > 300:   # PyYAML quotes what it read: an undefined alias of 1 MB, say
+            problem = f"{problem[:200]}… ({len(problem):,} characters)"
+        kind = "" if isinstance(exc, YamlRefused) else "YAML syntax error: "
+        raise StimuliError(f"{source}:{where}: {kind}{problem}") from None
+    finally:
+        loader.dispose()
+
+
+def _check_expansion(root: yaml.Node) -> None:
+    """Refuse a node tree whose aliases expand it past :data:`MAX_EXPANDED_SIZE` (nodes plus characters
+    of text, counted once per use) or :data:`MAX_NESTING`, or make it contain itself.
+
+    PyYAML builds an alias as a shared reference, so the expansion costs nothing until something walks
+    the values (validation, JSON, an error message): a chain of anchors each listing the one before nine
+    times makes 9⁹ strings from a few lines. Sizes are summed bottom-up, each distinct node once, without
+    recursion (a chain of 100,000 anchors must not overflow Python's stack).
+    """
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        key = id(node)
+        children = _children(node)
+        if children_done:
+            on_path.discard(key)
+            size[key] = 1 + (len(node.value) if isinstance(node, yaml.ScalarNode) else 0) + sum(size[id(c)] for c in children)
+            depth[key] = 1 + max((depth[id(c)] for c in children), default=0)
+            if size[key] > MAX_EXPANDED_SIZE:
+                raise YamlRefused(
+                    None, None, f"aliases expand this value past {MAX_EXPANDED_SIZE:,} characters (a 'billion "
+                    "laughs' file); write the values out, or use fewer aliases", node.start_mark)
+            if depth[key] > MAX_NESTING:
+                raise YamlRefused(
+                    None, None, f"aliases nest this value deeper than {MAX_NESTING} levels", node.start_mark)
+            continue
+        if key in size:
+            continue
+        if key in on_path:
+            raise YamlRefused(None, None, "an alias refers to itself (the value would contain "
+                                              "itself without end)", node.start_mark)
+        on_path.add(key)
+        stack.append((node, True))
+        stack.extend((child, False) for child in children if id(child) not in size)
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    return []
+
+
+def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
+    """Validate protocol text (see :func:`load_protocol`); ``source`` names it in messages."""
+    data, root = read_yaml(text, source)
     if not isinstance(data, dict):
         raise StimuliError(f"{source}: a protocol must be a YAML mapping (name:, factors:, …), got {type(data).__name__}")
     try:
@@ -764,16 +1055,18 @@ def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
 
 
 def describe_validation_error(exc: ValidationError, source: str, root) -> str:
-    """One paragraph: every problem as 'field (line N): message', fields in dotted form."""
+    """One paragraph: every problem as 'field (line N): message', fields in dotted form; long values
+    named by their size (:func:`shown`), at most :data:`MAX_PROBLEMS` problems and a count of the rest."""
     parts = []
-    for err in exc.errors():
+    errors = exc.errors(include_url=False, include_context=False)
+    for err in errors[:MAX_PROBLEMS]:
         loc = list(err["loc"])
         message = err["msg"].removeprefix("Value error, ")
         named = re.match(r"^([A-Za-z_][\w.]*): (.*)$", message, re.S)
-        if not loc and named:  # a cross-field rule names its own field: "blocks.by: …"
-            loc = [int(x) if x.isdigit() else x for x in named.group(1).split(".")]
+        if named:  # a rule names its own field, relative to where it runs: "blocks.by: …", "labels.1: …"
+            loc += [int(x) if x.isdigit() else x for x in named.group(1).split(".")]
             message = named.group(2)
-        field = ".".join(str(x) for x in loc) if loc else "(top level)"
+        field = ".".join(_key_text(x) for x in loc) if loc else "(top level)"
         line = _line_of(root, loc)
         where = f" (line {line})" if line else ""
         if err["type"] == "extra_forbidden":
@@ -782,12 +1075,20 @@ def describe_validation_error(exc: ValidationError, source: str, root) -> str:
         elif err["type"] == "missing":
             message = "required field is missing"
         elif "input" in err and err["type"] not in ("value_error",):
-            message += f" (got {err['input']!r})"
+            message += f" (got {shown(err['input'])})"
             if err["type"] in ("int_type", "bool_type"):  # strict fields: no true for 1, no "2", no 0 for false
                 message += ("; write a whole number without quotes" if err["type"] == "int_type"
                             else "; write true or false without quotes")
         parts.append(f"{field}{where}: {message}")
+    if len(errors) > MAX_PROBLEMS:
+        parts.append(f"and {len(errors) - MAX_PROBLEMS:,} more problems")
     return f"{source}: invalid protocol: " + "; ".join(parts)
+
+
+def _key_text(key) -> str:
+    """A key of an error location as the field name shows it; a long one (a 1 MB key) by its size."""
+    text = str(key)
+    return text if len(text) <= SHOWN_CHARACTERS else f"<a key of {len(text):,} characters>"
 
 
 def _known_fields(loc) -> list[str]:
@@ -804,7 +1105,8 @@ def _known_fields(loc) -> list[str]:
 
 
 def _line_of(root, loc) -> int | None:
-    """The 1-based YAML line of a pydantic error location, following the composed node tree."""
+    """The 1-based YAML line of a pydantic error location, following the composed node tree; a name in
+    a list (``factors.BODY``) is the item whose ``name`` (or ``id``) it is."""
     node, line = root, None
     for key in loc:
         if isinstance(node, yaml.MappingNode):
@@ -816,8 +1118,21 @@ def _line_of(root, loc) -> int | None:
         elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) and key < len(node.value):
             node = node.value[key]
             line = node.start_mark.line + 1
+        elif isinstance(node, yaml.SequenceNode) and isinstance(key, str) and _item_named(node, key) is not None:
+            node = _item_named(node, key)
+            line = node.start_mark.line + 1
         else:
             break
     if line is None and node is not None and node is not root:
         line = node.start_mark.line + 1
     return line
+
+
+def _item_named(sequence: yaml.SequenceNode, name: str) -> yaml.Node | None:
+    """The mapping in ``sequence`` whose ``name`` or ``id`` is ``name`` (factors by name, actors by id)."""
+    for item in sequence.value:
+        if isinstance(item, yaml.MappingNode) and any(
+                isinstance(k, yaml.ScalarNode) and k.value in ("name", "id") and getattr(v, "value", None) == name
+                for k, v in item.value):
+            return item
+    return None

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from stimuli.errors import StimuliError
-from stimuli.fileio import check_output_dir, check_output_file
+from stimuli.fileio import check_output_dir, check_output_file, output_path
 
 MESH_SUFFIXES = (".ply", ".obj", ".glb", ".stl")
 GIRTH_TOLERANCE_M = 0.02  # a girth target missed by more is reported, not passed off as reached
@@ -20,7 +20,7 @@ def register(subparsers) -> None:
                     "anthropometry.csv, segments.csv, contact_sheet.png into --out), or one body from "
                     "--sex/--height/--bmi (writes the mesh to --out, a .ply/.obj/.glb file).")
     p.add_argument("protocol", type=Path, nargs="?", help="protocol YAML (omit for a single body)")
-    p.add_argument("--out", type=Path, required=True, help="output folder (protocol) or mesh file (single body)")
+    p.add_argument("--out", type=output_path, required=True, help="output folder (protocol) or mesh file (single body)")
     p.add_argument("--sex", help="F or M (single body)")
     p.add_argument("--height", type=float, help="standing height in metres (single body)")
     p.add_argument("--bmi", type=float, help="body-mass index in kg/m² (single body)")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from stimuli.commands.checks import at_least, human_body, in_range, parse_body, positive
 from stimuli.errors import StimuliError
-from stimuli.fileio import check_output_dir, check_output_file
+from stimuli.fileio import check_output_dir, check_output_file, output_path
 
 
 STRIP_SUFFIXES = (".png", ".svg", ".pdf", ".jpg")
@@ -37,7 +37,7 @@ def register(subparsers) -> None:
     p.add_argument("--no-style", action="store_true", help="no individual style, trends only")
     p.add_argument("--fps", type=float, default=30.0)
     p.add_argument("--cycles", type=int, default=2)
-    p.add_argument("--out", type=Path, required=True, help="output .npz")
+    p.add_argument("--out", type=output_path, required=True, help="output .npz")
     p.add_argument("--bvh", type=Path, help="also write a BVH file")
     p.set_defaults(func=run_generate)
 
@@ -48,13 +48,13 @@ def register(subparsers) -> None:
     p.add_argument("--loop", action="store_true", help="trim to whole cycles, put on a treadmill, loop")
     p.add_argument("--cycles", type=int, default=None, help="whole cycles to keep when looping")
     p.add_argument("--fps", type=float, default=None, help="resample to this frame rate")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_import)
 
     p = sub.add_parser("average", help="DTW-aligned average of several motions on one skeleton")
     p.add_argument("motions", type=Path, nargs="+")
     p.add_argument("--cycles", type=int, default=2)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_average)
 
     p = sub.add_parser("modify", help="the thesis's five-parameter body-shape walk modifier")
@@ -64,7 +64,7 @@ def register(subparsers) -> None:
     p.add_argument("--chest", type=float, default=None, help="chest in m (default: interpolated from body fat)")
     p.add_argument("--wthr", type=float, default=None, help="waist-to-hip ratio (default: interpolated)")
     p.add_argument("--base-scale", type=float, default=1.0, help="multiplies the walking-base offset (read in mm; 10 = the thesis script's literal cm)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_modify)
 
     p = sub.add_parser("metrics", help="gait figures and HUMOS plausibility metrics of a motion")
@@ -75,7 +75,7 @@ def register(subparsers) -> None:
 
     p = sub.add_parser("export-bvh", help="write a motion as BVH")
     p.add_argument("motion", type=Path)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=output_path, required=True)
     p.add_argument("--order", default="ZYX", help="rotation channel order")
     p.add_argument("--scale", type=float, default=1.0, help="length unit multiplier (100: centimetres)")
     p.set_defaults(func=run_export)
@@ -84,14 +84,14 @@ def register(subparsers) -> None:
     p.add_argument("motion", type=Path)
     p.add_argument("--body", required=True, help="sex=M,height=1.80,bmi=25")
     p.add_argument("--keep-speed", action="store_true", help="keep the belt speed (no stride scaling)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_retarget)
 
     p = sub.add_parser("markers", help="the 15 point-light marker trajectories as CSV")
     p.add_argument("motion", type=Path)
     p.add_argument("--body", help="sex=M,height=1.80,bmi=25: the body whose rig the motion is on; the markers are "
                                   "then exactly the dots its point-light clips show")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_markers)
 
     p = sub.add_parser("strip", help="a frame strip (poses across one cycle, side view) as PNG")
@@ -99,7 +99,7 @@ def register(subparsers) -> None:
     p.add_argument("--protocol", type=Path, help="strips of every actor's generated walk and jog on its body")
     p.add_argument("--skeleton-only", action="store_true", help="with --protocol: do not retarget onto bodies")
     p.add_argument("--frames", type=int, default=8, help="poses per motion, evenly spaced over its first cycle (default 8)")
-    p.add_argument("--out", type=Path, required=True, help="PNG file (or folder with --protocol)")
+    p.add_argument("--out", type=output_path, required=True, help="PNG file (or folder with --protocol)")
     p.set_defaults(func=run_strip)
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from stimuli.commands.checks import in_range
 from stimuli.errors import StimuliError
+from stimuli.fileio import output_path
 
 
 def register(subparsers) -> None:
@@ -33,21 +34,21 @@ def register(subparsers) -> None:
                         "body shape it can (default: exit 2)")
     r.add_argument("--gait", choices=("walk", "jog"), default=None,
                    help="which gain set drives the ragdoll (default: the motion's metadata 'gait', else walk)")
-    r.add_argument("--out", type=Path, required=True, help="COM motion .npz to write")
+    r.add_argument("--out", type=output_path, required=True, help="COM motion .npz to write")
     r.add_argument("--report", type=Path, default=None, help="report JSON to write")
     r.set_defaults(func=run_retarget)
     pr = sub.add_parser("protocol", help="all COM motions of a protocol (cached)",
                         description="Make the COM motion of every actor × gait of PROTOCOL, the reports, "
                                     "summary.csv and the Fig.-7 plots.")
     pr.add_argument("protocol", type=Path)
-    pr.add_argument("--out", type=Path, required=True)
+    pr.add_argument("--out", type=output_path, required=True)
     pr.add_argument("--motions", type=Path, default=None,
                     help="folder with the NoCOM average motions <sex>_<gait>.npz (default: generated walks/jogs)")
     pr.add_argument("--workers", type=int, default=2)
     pr.set_defaults(func=run_protocol)
     t = sub.add_parser("tune", help="re-find the fixed controller gains on the base character",
                        description="Search the PD gains for the base character and write stimuli/physics/gains.json.")
-    t.add_argument("--out", type=Path, default=None, help="gains JSON (default: the package's gains.json)")
+    t.add_argument("--out", type=output_path, default=None, help="gains JSON (default: the package's gains.json)")
     t.add_argument("--gait", choices=("walk", "jog", "all"), default="all",
                    help="which gait's gains to re-find (base: CMU 35_01 walk / 35_17 run); default all")
     t.add_argument("--target-rms", type=float, default=None, metavar="DEG",

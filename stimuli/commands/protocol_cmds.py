@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from stimuli.fileio import output_path
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("validate", help="check a protocol file and summarise it",
@@ -17,12 +19,12 @@ def register(subparsers) -> None:
     p.add_argument("protocol", type=Path)
     p.add_argument("--participants", type=int, default=None, help="number of participants (default: the protocol's)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the protocol's)")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=output_path, required=True, help="output folder")
     p.set_defaults(func=run_design)
 
     p = subparsers.add_parser("demo", help="run the whole chain on the bundled protocols",
                               description="Run every step of shapemotion on the bundled protocols.")
-    p.add_argument("--out", type=Path, default=Path("demo_output"))
+    p.add_argument("--out", type=output_path, default=Path("demo_output"))
     p.add_argument("--quick", action="store_true", help="smaller sizes everywhere (for tests)")
     p.set_defaults(func=run_demo)
 
