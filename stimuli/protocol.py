@@ -977,8 +977,9 @@ def read_yaml(text: str, source: str = "<protocol>") -> tuple[object, yaml.Node 
     """
     if len(text) > MAX_PROTOCOL_BYTES:
         raise StimuliError(_too_large(source, len(text), "characters"))
-    loader = ProtocolLoader(text)
+    loader = None
     try:
+        loader = ProtocolLoader(text)   # reads the text's first characters: a control character fails here
         root = loader.get_single_node()
         if root is None:
             return None, None
@@ -988,12 +989,17 @@ def read_yaml(text: str, source: str = "<protocol>") -> tuple[object, yaml.Node 
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
+        if isinstance(exc, yaml.reader.ReaderError):   # it has no mark, only the character's position
+            line_start = text.rfind("\n", 0, exc.position) + 1
+            where = f" line {text.count(chr(10), 0, exc.position) + 1}, column {exc.position - line_start + 1}"
+            problem = f"character #x{exc.character:04x} is not allowed in YAML ({exc.reason})"
         if len(problem) > 300:   # PyYAML quotes what it read: an undefined alias of 1 MB, say
             problem = f"{problem[:200]}… ({len(problem):,} characters)"
         kind = "" if isinstance(exc, YamlRefused) else "YAML syntax error: "
         raise StimuliError(f"{source}:{where}: {kind}{problem}") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def _check_expansion(root: yaml.Node) -> None:

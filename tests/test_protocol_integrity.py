@@ -296,3 +296,10 @@ def test_too_many_nodes_are_refused_early():
         parse_protocol(text, source="big.yaml")
     assert time.perf_counter() - start < 3.0
     assert "big.yaml: line 33" in str(info.value)
+
+
+def test_control_character_is_a_message_with_its_line(tmp_path, run_cli):
+    """PyYAML's reader refuses control characters before any line is known (the fuzz suite found a
+    traceback here): the message counts the line itself."""
+    message = refused(run_cli, tmp_path, replace(EXP1, "seed: 2023", "seed: 20\x1f23"), "validate")
+    assert "line 7, column 9" in message and "#x001f is not allowed" in message
