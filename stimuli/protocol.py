@@ -1025,8 +1025,8 @@ def _check_expansion(root: yaml.Node) -> None:
             depth[key] = 1 + max((depth[id(c)] for c in children), default=0)
             if size[key] > MAX_EXPANDED_SIZE:
                 raise YamlRefused(
-                    None, None, f"aliases expand this value past {MAX_EXPANDED_SIZE:,} characters (a 'billion "
-                    "laughs' file); write the values out, or use fewer aliases", node.start_mark)
+                    None, None, f"aliases expand this value past {MAX_EXPANDED_SIZE:,} characters and nodes (a "
+                    "'billion laughs' file); write the values out, or use fewer aliases", node.start_mark)
             if depth[key] > MAX_NESTING:
                 raise YamlRefused(
                     None, None, f"aliases nest this value deeper than {MAX_NESTING} levels", node.start_mark)
