@@ -303,3 +303,15 @@ def test_control_character_is_a_message_with_its_line(tmp_path, run_cli):
     traceback here): the message counts the line itself."""
     message = refused(run_cli, tmp_path, replace(EXP1, "seed: 2023", "seed: 20\x1f23"), "validate")
     assert "line 7, column 9" in message and "#x001f is not allowed" in message
+
+
+@pytest.mark.parametrize("args", [["bodies", "--protocol", "protocols/exp1_shape_motion.yaml"],
+                                  ["motion", "generate"], ["physics", "retarget"],
+                                  ["survey", "protocols", "--format", "jspsych"]])
+def test_empty_out_is_refused_by_other_commands(args, capsys):
+    """The same argparse type guards every --out of the stimuli commands (render's is its owner's)."""
+    from stimuli.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main([*args, "--out", ""])
+    assert info.value.code == 2 and "argument --out: an empty path" in capsys.readouterr().err

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from stimuli.commands.checks import base_url
+from stimuli.fileio import output_path
 
 FORMATS = ("qsf", "qualtrics-txt", "jspsych", "psychopy")
 FILE_FORMATS = ("qsf", "qualtrics-txt")  # the others write a folder
@@ -19,7 +20,7 @@ def register(subparsers) -> None:
                     "manifest.csv. Without a manifest, clips are clips/<stimulus_id>.mp4.")
     p.add_argument("folder", type=Path, help="design or render output folder")
     p.add_argument("--format", required=True, choices=FORMATS)
-    p.add_argument("--out", type=Path, required=True,
+    p.add_argument("--out", type=output_path, required=True,
                    help="output file (qsf, qualtrics-txt) or new folder (jspsych, psychopy)")
     p.add_argument("--video-base-url", default=None, help="URL the clips are served from (Qualtrics; jspsych: instead of copying the clips)")
     p.add_argument("--post-url", default="", help="jspsych: also POST each participant's CSV to this URL")
