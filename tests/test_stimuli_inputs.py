@@ -340,7 +340,6 @@ def test_bundled_protocols_still_validate(run_cli):
     (["motion", "strip", "{walk}", "--frames", "0", "--out", "s.png"], "--frames: expected a whole number >= 1"),
     (["motion", "strip", "{walk}", "--frames", "-3", "--out", "s.png"], "--frames"),
     (["motion", "strip", "{walk}", "--out", "s.csv"], "a strip is an image"),
-    (["motion", "metrics", "{walk}", "--body", BODY], "retarget it first"),
     (["motion", "markers", "{walk}", "--out", "m.txt"], "the markers are written as a .csv file"),
 ])
 def test_motion_options(work, run_cli, walk, args, message):
@@ -355,15 +354,18 @@ def test_motion_options(work, run_cli, walk, args, message):
     assert _tree(work) == before
 
 
-def test_metrics_and_markers_refuse_a_body_the_motion_is_not_on(work, run_cli, walk):
+def test_markers_refuse_and_metrics_retarget_a_body_the_motion_is_not_on(work, run_cli, walk):
     """Every Anny rig has the same joint names: a motion on a man of 1.80 m measured on a woman of 1.50 m
-    used to pass (Float 18 cm instead of 0.3)."""
+    used to pass (Float 18 cm instead of 0.3). The markers refuse it; the metrics measure it retargeted
+    onto that body and say so."""
     from stimuli.cli import main
 
     assert main(["motion", "retarget", str(walk), "--body", BODY, "--out", str(work / "r.npz")]) == 0
-    for command in (["metrics", "--json", "q.json"], ["markers", "--out", "m.csv"]):
-        err = _fails(run_cli, "motion", command[0], work / "r.npz", "--body", "sex=F,height=1.50,bmi=40", *command[1:])
-        assert "must be on its rig (it is on body M_h180_b25.0)" in " ".join(err.split()), err
+    err = _fails(run_cli, "motion", "markers", work / "r.npz", "--body", "sex=F,height=1.50,bmi=40", "--out", "m.csv")
+    assert "must be on its rig (it is on body M_h180_b25.0)" in " ".join(err.split()), err
+    code, out, err = run_cli("motion", "metrics", work / "r.npz", "--body", "sex=F,height=1.50,bmi=40")
+    assert code == 0 and "retargeted onto that body" in " ".join(err.split()) and "(it is on body M_h180_b25.0)" in err
+    assert json.loads(out)["float_mm"] < 10.0, out
     assert run_cli("motion", "markers", work / "r.npz", "--body", BODY, "--out", work / "new" / "m.csv")[0] == 0
     assert (work / "new" / "m.csv").read_text().startswith("frame,time_s,marker,x,y,z")   # folder made, no traceback
 

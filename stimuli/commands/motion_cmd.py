@@ -69,7 +69,8 @@ def register(subparsers) -> None:
 
     p = sub.add_parser("metrics", help="gait figures and HUMOS plausibility metrics of a motion")
     p.add_argument("motion", type=Path)
-    p.add_argument("--body", help="sex=M,height=1.80,bmi=25: measure on the skinned mesh of this body")
+    p.add_argument("--body", help="sex=M,height=1.80,bmi=25: measure on the skinned mesh of this body (a motion not "
+                                  "on its rig is retargeted onto it first)")
     p.add_argument("--json", type=Path, help="write the metrics as JSON")
     p.set_defaults(func=run_metrics)
 
@@ -122,6 +123,21 @@ def _on_body(motion, args: argparse.Namespace):
                            + f"; retarget it first: shapemotion motion retarget {args.motion} --body {args.body} "
                            "--out R.npz")
     return body
+
+
+def _onto_body(motion, body, args: argparse.Namespace):
+    """``motion`` on ``body``'s rig for the mesh metrics: retargeted first (and said so) when it is not
+    on it yet — a motion of a 1.80 m man skinned on a 1.50 m woman's rig read Float 18 cm."""
+    from stimuli.motion.retarget import is_on_rig, retarget
+
+    if is_on_rig(motion, body):
+        return motion
+    made_for = motion.metadata.get("body_id")
+    print(f"note: {args.motion} is not on the rig of body {body.body_id}"
+          + (f" (it is on body {made_for})" if made_for else "")
+          + f"; measuring it retargeted onto that body (as 'shapemotion motion retarget {args.motion} "
+          f"--body {args.body}' would)", file=sys.stderr)
+    return retarget(motion, body)
 
 
 def _load(path: Path):
@@ -279,10 +295,12 @@ def run_metrics(args: argparse.Namespace) -> int:
 
     check_output_file(args.json, "--json")
     m = _load(args.motion)
-    body = _on_body(m, args) if args.body else None
     if m.n_frames < MIN_METRIC_FRAMES:
         raise StimuliError(f"{args.motion}: {m.n_frames} frame(s) hold no gait cycle; the metrics need a motion of "
                            f"at least one cycle (≥ {MIN_METRIC_FRAMES} frames)")
+    body = _fit(args.body) if args.body else None
+    if body is not None:
+        m = _onto_body(m, body, args)
     q = motion_quality(m, body)
     # NaN (a figure with no value, e.g. no foot contact) is not JSON: write null.
     text = json.dumps(_finite_or_none(q), indent=2, sort_keys=True)
