@@ -109,7 +109,7 @@ class Factor(Strict):
     @field_validator("levels", mode="before")
     @classmethod
     def _levels_as_text(cls, value):
-        return [str(v) for v in value] if isinstance(value, list) else value
+        return levels_as_text(value)
 
     @field_validator("name")
     @classmethod
@@ -142,6 +142,24 @@ class Factor(Strict):
 
     def abbreviation(self, level: str) -> str:
         return self.abbreviations.get(level, level)
+
+
+def levels_as_text(value):
+    """A list of levels as text: YAML reads ``3`` or ``12.5`` as numbers, which name levels as well as
+    words. Anything else is left for the field's own check to refuse: a string is not iterated into
+    letters (``BODY: P1`` is not ``[P, 1]``), ``yes``/``no``/``on``/``off`` (true and false to YAML)
+    are refused rather than silently renamed ``True``/``False``.
+
+    >>> levels_as_text([3, 12.5, "Hi1"]), levels_as_text("P1")
+    (['3', '12.5', 'Hi1'], 'P1')
+    """
+    if not isinstance(value, list):
+        return value
+    for item in value:
+        if isinstance(item, bool):
+            raise ValueError(f"level {item}: YAML reads yes, no, on, off, true and false as true or false; "
+                             "put the level in quotes (\"yes\") or rename it")
+    return [str(v) if isinstance(v, (int, float)) else v for v in value]
 
 
 def _check_name_length(name: str) -> None:
@@ -368,7 +386,7 @@ class Practice(Strict):
     @field_validator("levels", mode="before")
     @classmethod
     def _as_text(cls, value):
-        return {k: [str(v) for v in vs] for k, vs in value.items()} if isinstance(value, dict) else value
+        return {k: levels_as_text(vs) for k, vs in value.items()} if isinstance(value, dict) else value
 
 
 class Familiarization(Strict):

@@ -315,3 +315,29 @@ def test_empty_out_is_refused_by_other_commands(args, capsys):
     with pytest.raises(SystemExit) as info:
         main([*args, "--out", ""])
     assert info.value.code == 2 and "argument --out: an empty path" in capsys.readouterr().err
+
+
+LEVEL_TYPE_CASES = {
+    "practice levels given as a number": ("levels: {BODY: 5, MOTION: [P1, P2]}", "practice.levels.BODY (line 71)",
+                                          "valid list (got 5)"),
+    "practice levels given as one word": ("levels: {BODY: P1, MOTION: [P1, P2]}", "practice.levels.BODY (line 71)",
+                                          "valid list (got 'P1')"),
+    "practice levels left empty": ("levels: {BODY: , MOTION: [P1, P2]}", "practice.levels.BODY", "(got None)"),
+    "a level YAML reads as true": ("levels: {BODY: [P1, on], MOTION: [P1, P2]}", "practice.levels (line 71)",
+                                   "level True: YAML reads yes, no, on, off, true and false as true or false"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(LEVEL_TYPE_CASES))
+def test_levels_of_the_wrong_type(case, tmp_path, run_cli):
+    """``BODY: 5`` was a TypeError traceback, ``BODY: P1`` the levels 'P' and '1', ``on`` a level 'True'."""
+    new, *expected = LEVEL_TYPE_CASES[case]
+    message = refused(run_cli, tmp_path, replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", new))
+    for fragment in expected:
+        assert fragment in message, (fragment, message)
+
+
+def test_numbers_still_name_levels():
+    """The point-light protocol's strengths 3, 12, 35 … are numbers to YAML and levels as text."""
+    p = load_protocol(PROTOCOLS / "thesis_pointlight.yaml")
+    assert all(isinstance(level, str) for f in p.factors for level in f.levels)
