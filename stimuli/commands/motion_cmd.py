@@ -236,6 +236,10 @@ def run_import(args: argparse.Namespace) -> int:
     if src.suffix.lower() == ".bvh":
         from stimuli.motion.bvh import read_bvh
         m = read_bvh(src, mapping=args.mapping, height_m=args.height)
+        # What the import changed or dropped (a T-pose ease-in, a root OFFSET, a re-rooted rig) is
+        # said, not only recorded in the metadata.
+        for note in m.metadata.get("import_notes", []):
+            print(f"note: {src.name}: {note}", file=sys.stderr)
     elif src.suffix.lower() == ".npz":
         from stimuli.motion.amass import read_amass
         m = read_amass(src, height_m=args.height)

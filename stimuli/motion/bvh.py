@@ -2,10 +2,25 @@
 
 Import reads the hierarchy with ``bvhio`` (its parser checks the syntax and reports the line), then
 reads the frames with numpy in one go (bvhio builds one object per joint and frame, far slower) and
-converts any channel order to quaternions. The skeleton naming is detected (CMU cgspeed, Mixamo,
-Poser/old CMU, DAZ) or given by a mapping file; the units are found from the skeleton's height;
-a z-up file is turned y-up; the reference T-pose frame that many converted files start with is
-dropped. End sites become leaf joints named ``<parent>_end`` (they give toe tips and head tops).
+converts any channel order to quaternions. It survives what real exporters write:
+
+- **namings**: the known tables (CMU cgspeed, Mixamo, Poser/old CMU, DAZ), else name patterns and
+  the tree (:func:`~stimuli.motion.skeleton.pattern_roles`: Character Creator 4, Bandai, 3ds Max
+  Biped and CMU 3ds Max names, …), or a mapping file; a message naming the file, the missing roles
+  and the joints no role took where neither finds the legs;
+- **toe-less feet**: the ankle's End Site is the toe (the foot bone keeps its motion);
+- **position channels below the root** (Bandai: a static ``joint_Root`` above the moving ``Hips``):
+  the skeleton is re-rooted at the moving joint; constant ones become the bone's offset;
+- **the root's OFFSET** is added to its position channels where the feet then stand on the floor
+  (Character Creator puts the hip height there);
+- **up axis** from the frames (pelvis → head), not from the rest pose, which need not stand;
+- **units** from the leg segments' length (m, cm, mm, inches, CMU's 0.45-inch unit), else scaled;
+- **a T/A-pose ease-in**: leading frames whose arms are abducted beyond the rest of the capture, and
+  the blend out of them, are dropped, and the metadata says so (``dropped_lead_frames``,
+  ``import_notes``, which ``motion import`` prints);
+- CRLF or LF line endings, any frame rate.
+
+End sites become leaf joints named ``<parent>_end`` (they give toe tips and head tops).
 
 Examples
 --------
@@ -26,11 +41,16 @@ from stimuli.errors import StimuliError
 from stimuli.fileio import atomic_write_text
 from stimuli.motion import quat
 from stimuli.motion.motion import Motion
-from stimuli.motion.skeleton import detect_roles, load_mapping
+from stimuli.motion.skeleton import ancestors, detect_roles, leg_length, load_mapping
 
-# File unit → metres, chosen by the skeleton's rest height (in file units) falling in the range.
+# File unit → metres, chosen by the skeleton's stature (in file units) falling in the range: metres,
+# centimetres, millimetres, inches (1.2–2.4 m) and the CMU ASF unit (0.45 in: 1/0.45 in = 0.056444 m,
+# the unit of the cgspeed CMU conversions; 1.0–2.4 m).
 UNIT_RANGES = ((1.0, 2.4, 1.0, "m"), (100.0, 240.0, 0.01, "cm"), (1000.0, 2400.0, 0.001, "mm"),
-               (39.0, 95.0, 0.0254, "in"))
+               (47.0, 95.0, 0.0254, "in"), (17.7, 42.5, 0.0254 / 0.45, "cmu"))
+# Hip-joint centre height over stature (Winter 2009's segment table: 0.530 at the greater
+# trochanter; the joint centre sits lower): the legs' length times 2 is the stature estimate.
+LEG_OVER_STATURE = 0.5
 DEFAULT_HEIGHT_M = 1.75  # assumed body height when the units cannot be recognised
 
 
@@ -114,11 +134,11 @@ def _channel_line(path: Path, joint: str) -> str:
     return ""
 
 
-def _channel_rotations(frames: np.ndarray, joints: list, path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Local quaternions (T×J×4) and root translation (T×3) from the channel columns."""
+def _channel_rotations(frames: np.ndarray, joints: list, path: Path) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """Local quaternions (T×J×4) and the position channels of every joint that has them ({j: T×3})."""
     t = frames.shape[0]
     rot = np.tile(quat.IDENTITY, (t, len(joints), 1))
-    root = np.zeros((t, 3))
+    translations: dict[int, np.ndarray] = {}
     col = 0
     for j, (name, parent, offset, channels, _) in enumerate(joints):
         order, rcols = "", []
@@ -128,9 +148,7 @@ def _channel_rotations(frames: np.ndarray, joints: list, path: Path) -> tuple[np
                 order += c[0].upper()
                 rcols.append(col)
             elif c in ("xposition", "yposition", "zposition"):
-                # Only the root's translation moves the body; other position channels repeat offsets.
-                if parent == -1:
-                    root[:, "xyz".index(c[0])] = frames[:, col]
+                translations.setdefault(j, np.zeros((t, 3)))[:, "xyz".index(c[0])] = frames[:, col]
             else:
                 raise StimuliError(f"{path}: {_channel_line(path, name)}joint {name!r} has unknown channel {ch!r} "
                                    "(expected Xposition, Yposition, Zposition, Xrotation, Yrotation, Zrotation)")
@@ -139,7 +157,69 @@ def _channel_rotations(frames: np.ndarray, joints: list, path: Path) -> tuple[np
             rot[:, j] = quat.from_euler(frames[:, rcols], order)
         elif order:
             raise StimuliError(f"{path}: joint {name!r} has {len(order)} rotation channels, expected 3")
-    return rot, root
+    return rot, translations
+
+
+def _channels_replace_offsets(offsets: np.ndarray, translations: dict[int, np.ndarray]) -> bool:
+    """Whether a file's non-root position channels replace the OFFSET (else they add to it).
+
+    Exporters disagree: Bandai writes each bone's translation in its channels (equal to the OFFSET
+    where the bone does not move; the moving hips then hold absolute values), others write a change
+    added to the OFFSET (zeros). The joints that do not move tell which: their channels equal
+    either the OFFSET or zero. Without such a joint they add (the usual reading).
+
+    >>> off = np.array([[0.0, 0, 0], [0, 90, 0], [10, 0, 0]])
+    >>> _channels_replace_offsets(off, {1: np.array([[1.0, 89, 0], [1, 88, 0]]), 2: np.array([[10.0, 0, 0]] * 2)})
+    True
+    """
+    votes = []
+    for j, tr in translations.items():
+        size = np.linalg.norm(offsets[j])
+        if j == 0 or size == 0 or np.ptp(tr, axis=0).max() > 1e-6 * size:
+            continue
+        votes.append(bool(np.linalg.norm(tr[0] - offsets[j]) < np.linalg.norm(tr[0])))
+    return bool(votes) and sum(votes) * 2 >= len(votes)
+
+
+def _reroot(names: list[str], parents: np.ndarray, offsets: np.ndarray, rot: np.ndarray,
+            translations: dict[int, np.ndarray]) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                          list[str]]:
+    """Skeleton whose only moving translation is the root's (the Motion contract).
+
+    Non-root position channels that stay constant become the bone's offset. When a joint below
+    the root moves (Bandai: a static ``joint_Root`` above the animated ``Hips``), the skeleton is
+    re-rooted there: its world rotation and position (through the joints above) become the root's,
+    and the joints above it, which carry nothing but that transform, are dropped (returned by name).
+    """
+    offsets = offsets.copy()
+    t = rot.shape[0]
+    replace = _channels_replace_offsets(offsets, translations)
+    local = {j: tr if replace else offsets[j] + tr for j, tr in translations.items() if j > 0}
+    size = max(float(np.abs(offsets).max()), 1e-9)
+    moving = [j for j, tr in local.items() if np.ptp(tr, axis=0).max() > 1e-4 * size]
+    for j, tr in local.items():
+        offsets[j] = np.median(tr, axis=0)
+    root_t = translations.get(0, np.zeros((t, 3)))
+    if not moving:
+        return names, parents, offsets, rot, root_t, []
+    top = min(moving)   # depth-first order: the first moving joint is an ancestor of, or beside, the others
+    chain = [top]
+    while parents[chain[-1]] > 0:
+        chain.append(int(parents[chain[-1]]))
+    chain.reverse()
+    g, pos = rot[:, 0], root_t + offsets[0]
+    for k in chain:
+        pos = pos + quat.rotate(g, local.get(k, np.broadcast_to(offsets[k], (t, 3))))
+        g = quat.mul(g, rot[:, k])
+    keep = [top] + [k for k in range(top + 1, len(names)) if top in ancestors(k, parents)]
+    index = {old: new for new, old in enumerate(keep)}
+    new_rot = rot[:, keep].copy()
+    new_rot[:, 0] = g
+    new_parents = np.array([-1] + [index[int(parents[k])] for k in keep[1:]])
+    new_offsets = offsets[keep].copy()
+    new_offsets[0] = 0.0
+    dropped = [names[k] for k in range(len(names)) if k not in index]
+    return [names[k] for k in keep], new_parents, new_offsets, new_rot, pos, dropped
 
 
 def _unit_scale(height_units: float, height_m: float | None) -> tuple[float, str]:
@@ -153,25 +233,25 @@ def _unit_scale(height_units: float, height_m: float | None) -> tuple[float, str
 
 
 def skeleton_stature(motion: Motion) -> float:
-    """Standing height of a y-up skeleton in its own units.
-
-    The larger of the rest pose's vertical extent and twice the hip-joint height (hip joint centres
-    sit at about half the stature, Winter 2009); many files end the head bone well below the crown.
-    """
-    rest = motion.rest_positions()
-    roles = motion.metadata.get("roles", {})
-    floor = rest[:, 1].min()
-    hips = [rest[motion.index(roles[r]), 1] - floor for r in ("l_hip", "r_hip") if r in roles]
-    return float(max(np.ptp(rest[:, 1]), 2.0 * np.mean(hips) if hips else 0.0))
+    """Standing height of a y-up skeleton in its own units: twice the legs' length (:func:`leg_length`;
+    hip-joint centres sit at about half the stature, Winter 2009). From the segment lengths, not the
+    rest pose: rest poses lie (CC4's bones all point along +y, legs may be splayed) and many files
+    end the head bone well below the crown."""
+    return leg_length(motion) / LEG_OVER_STATURE
 
 
 def _to_y_up(motion: Motion, roles: dict[str, str]) -> Motion:
-    """Rotate a z-up (or x-up) skeleton so that the pelvis→head direction is +y."""
-    rest = motion.rest_positions()
+    """Rotate a z-up (or x-up) capture so that the pelvis→head direction is +y.
+
+    The direction is the median over the frames, not the rest pose's: a rig's rest pose need not
+    stand (CC4's bones all lie along +y; a root rotated −90° about x stands the body up only in the
+    frames).
+    """
     up_role = "head" if "head" in roles else "chest" if "chest" in roles else None
     if up_role is None:
         return motion
-    up = rest[motion.index(roles[up_role])] - rest[motion.index(roles["pelvis"])]
+    pos = motion.positions()
+    up = np.median(pos[:, motion.index(roles[up_role])] - pos[:, motion.index(roles["pelvis"])], axis=0)
     axis = int(np.argmax(np.abs(up)))
     if axis == 1 and up[1] > 0:
         return motion
@@ -188,15 +268,69 @@ def _conjugate(motion: Motion, c: np.ndarray) -> Motion:
                           root_translation=quat.rotate(c, motion.root_translation))
 
 
-def _drop_reference_frame(motion: Motion) -> tuple[Motion, bool]:
-    """Drop frame 0 when it is a reference pose far from the motion (converted CMU files)."""
-    if motion.n_frames < 3:
-        return motion, False
-    first = quat.angle(quat.mul(quat.inv(motion.rotations[0]), motion.rotations[1])).max()
-    second = quat.angle(quat.mul(quat.inv(motion.rotations[1]), motion.rotations[2])).max()
-    if first > np.radians(20) and first > 10 * max(second, 1e-3):
-        return motion.slice(1), True
-    return motion, False
+# A leading frame is a rest/T/A pose, or blends from one, when its arms are abducted this far
+# beyond the clip's own range (99th percentile of the frames after the first quarter) and at least
+# this far from the body: a T-pose is at 90°, an A-pose at 40–50°, a walk's arms at 0–20°.
+EASE_IN_MARGIN_DEG = 15.0
+EASE_IN_MIN_DEG = 30.0
+
+
+def arm_abduction(motion: Motion) -> np.ndarray:
+    """Mean lateral elevation of the two upper arms per frame, degrees (0 = hanging, 90 = T-pose).
+
+    The elevation is the upper arm's angle out of the body's sagittal plane, the plane's normal
+    being the hip line (right hip → left hip), so swinging the arms forward and back does not count.
+    """
+    roles = motion.metadata["roles"]
+    pos = motion.positions()
+    lateral = pos[:, motion.index(roles["l_hip"])] - pos[:, motion.index(roles["r_hip"])]
+    lateral /= np.linalg.norm(lateral, axis=1, keepdims=True)
+    out = []
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        arm = pos[:, motion.index(roles[f"{s}_elbow"])] - pos[:, motion.index(roles[f"{s}_shoulder"])]
+        arm /= np.maximum(np.linalg.norm(arm, axis=1, keepdims=True), 1e-12)
+        out.append(np.degrees(np.arcsin(np.clip(sign * np.sum(arm * lateral, axis=1), -1, 1))))
+    return np.mean(out, axis=0)
+
+
+def ease_in_frames(motion: Motion) -> int:
+    """How many leading frames are a rest/T/A pose or the blend out of one (0 if none).
+
+    The frames from the start whose arm abduction (:func:`arm_abduction`) lies beyond the clip's
+    own range, plus the following frames while the arms still come down faster than they ever
+    move in the rest of the clip (the tail of a blend). Real motion is never dropped: a frame
+    within the clip's range that is not still falling out of a T-pose stops the count.
+    """
+    roles = motion.metadata.get("roles", {})
+    if motion.n_frames < 8 or not all(f"{s}_{r}" in roles for s in "lr" for r in ("shoulder", "elbow", "hip")):
+        return 0
+    a = arm_abduction(motion)
+    ref = a[motion.n_frames // 4:]
+    high = np.percentile(ref, 99)
+    limit = max(high + EASE_IN_MARGIN_DEG, EASE_IN_MIN_DEG)
+    n = 0
+    while n < motion.n_frames // 4 and a[n] > limit:
+        n += 1
+    if n == 0:
+        return 0
+    fastest = np.percentile(np.abs(np.diff(ref)), 99)
+    while n < motion.n_frames // 4 and a[n] > high and a[n - 1] - a[n] > 2.0 * fastest:
+        n += 1
+    return n
+
+
+def _root_offset_needed(motion: Motion) -> bool:
+    """Whether the root's OFFSET must be added to its position channels (CC4 puts the hip height there).
+
+    BVH readers disagree on the root's OFFSET; the floor decides: the feet of a capture stand on
+    y = 0, so the reading whose lowest foot point is nearer 0 is the right one.
+    """
+    if not np.any(motion.offsets[0]):
+        return False
+    roles = motion.metadata["roles"]
+    feet = [motion.index(roles[f"{s}_{r}"]) for s in "lr" for r in ("ankle", "toe") if f"{s}_{r}" in roles]
+    low = motion.positions()[:, feet, 1].min()
+    return abs(low + motion.offsets[0][1]) < abs(low)
 
 
 def read_bvh(path: str | Path, mapping: str | Path | None = None, height_m: float | None = None,
@@ -208,7 +342,8 @@ def read_bvh(path: str | Path, mapping: str | Path | None = None, height_m: floa
     path : the ``.bvh`` file.
     mapping : optional YAML/JSON ``{role: joint}`` file for namings that are not recognised.
     height_m : body height of the performer; scales the skeleton (else units are recognised).
-    drop_reference : drop a leading reference pose (T-pose) frame.
+    drop_reference : drop the leading rest/T/A-pose frames and the blend out of them
+        (:func:`ease_in_frames`).
     """
     import bvhio
 
@@ -227,22 +362,35 @@ def read_bvh(path: str | Path, mapping: str | Path | None = None, height_m: floa
     joints = _flatten(container.Root)
     n_channels = sum(len(j[3]) for j in joints)
     frames, frame_time = _read_frames(path, n_channels)
-    rot, root = _channel_rotations(frames, joints, path)
-    names = [j[0] for j in joints]
-    detected = load_mapping(mapping, names) if mapping else detect_roles(names, where=str(path))
+    rot, translations = _channel_rotations(frames, joints, path)
+    names, parents, offsets, rot, root, dropped_joints = _reroot(
+        [j[0] for j in joints], np.array([j[1] for j in joints]), np.stack([j[2] for j in joints]), rot, translations)
+    detected = load_mapping(mapping, names) if mapping else detect_roles(names, where=str(path), parents=parents)
     fps = 1.0 / frame_time
     # ".0083333" means 120 Hz: snap rates within 0.01 % of an integer.
     fps = float(round(fps)) if abs(fps - round(fps)) < 1e-4 * fps else fps
-    motion = Motion(fps=fps, joint_names=names, parents=np.array([j[1] for j in joints]),
-                    offsets=np.stack([j[2] for j in joints]), rotations=rot, root_translation=root,
+    motion = Motion(fps=fps, joint_names=names, parents=parents, offsets=offsets, rotations=rot, root_translation=root,
                     metadata={"source": f"bvh:{path.name}", "naming": detected["naming"], "roles": detected["roles"]})
-    motion, dropped = _drop_reference_frame(motion) if drop_reference else (motion, False)
+    notes = []
+    if dropped_joints:
+        notes.append(f"re-rooted at {names[0]} (the joint whose position channels move); dropped "
+                     f"{', '.join(dropped_joints)} above it")
     motion = _to_y_up(motion, detected["roles"])
+    offset_added = _root_offset_needed(motion)
+    if offset_added:
+        motion = motion.replace(root_translation=motion.root_translation + motion.offsets[0])
+        notes.append(f"root {names[0]}'s OFFSET added to its position channels (the feet stand on the floor)")
+    n_lead = ease_in_frames(motion) if drop_reference else 0
+    if n_lead:
+        notes.append(f"dropped the first {n_lead} frame(s) ({n_lead / fps:.3f} s): a rest/T-pose or the blend "
+                     "out of one (arms abducted beyond the rest of the capture)")
+        motion = motion.slice(n_lead)
     stature = skeleton_stature(motion)
     scale, unit = _unit_scale(stature, height_m)
     motion = motion.replace(offsets=motion.offsets * scale, root_translation=motion.root_translation * scale)
-    motion.metadata.update(unit=unit, unit_scale=scale, dropped_reference_frame=dropped,
-                           source_height_m=float(stature * scale))
+    motion.metadata.update(unit=unit, unit_scale=scale, dropped_reference_frame=bool(n_lead),
+                           dropped_lead_frames=n_lead, root_offset_added=offset_added,
+                           source_height_m=float(stature * scale), import_notes=notes)
     return motion
 
 

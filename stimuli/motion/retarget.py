@@ -8,8 +8,9 @@ Method (rest-pose alignment, then clean-up):
    Anny's A-pose, splayed legs, a CMU foot bone pointing down) while keeping the source's twist; a
    final swing makes each bone point exactly along the source segment. The spine is spread over
    Anny's five spine bones by slerp between pelvis and chest, the neck over its three.
-2. The pelvis path is scaled by the leg-length ratio (hip-joint height of the rests): root height
-   and stride follow the target's legs, so the belt speed scales too (recorded).
+2. The pelvis path is scaled by the leg-length ratio (thigh + shank + ankle height, from the
+   segment lengths, whatever the rest pose): root height and stride follow the target's legs, so
+   the belt speed scales too (recorded).
 3. Foot clean-up (``footfix``): contacts are detected on the retargeted feet (near the ground and
    slow relative to the belt), planted feet are pinned and moved at belt speed by two-bone IK, the
    sole points come from the body mesh so the ground is at y = 0.
@@ -28,7 +29,7 @@ from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
 from stimuli.motion.footfix import clean_feet, sole_positions
 from stimuli.motion.motion import Motion
-from stimuli.motion.skeleton import NAMINGS, role_indices
+from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
 
 ANNY_ROLES = {role: names[0] for role, names in NAMINGS["anny"].items()}
 # Anny bone → (source role whose world rotation drives it, (from role, to role) of the segment).
@@ -87,8 +88,23 @@ def anny_motion(body, rotations: np.ndarray, root: np.ndarray, fps: float, metad
                   rotations=rotations, root_translation=root, metadata=meta)
 
 
-def _leg_height(rest: np.ndarray, roles: dict[str, int], floor: float) -> float:
-    return float(np.mean([rest[roles[f"{s}_hip"], 1] for s in ("l", "r")]) - floor)
+def rig_leg_length(rig) -> float:
+    """Thigh + shank + ankle height of an Anny rig's rest legs (its mesh stands on y = 0): the same
+    measure as :func:`~stimuli.motion.skeleton.leg_length` of a source, so their ratio is the legs'."""
+    rest = _rest_pos(rig)
+    out = []
+    for s in ("L", "R"):
+        hip, knee, ankle = (rest[rig.index(f"{b}.{s}")] for b in ("upperleg01", "lowerleg01", "foot"))
+        out.append(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee) + ankle[1])
+    return float(np.mean(out))
+
+
+def standing_pelvis_height(source: Motion, roles: dict[str, int]) -> float:
+    """Height of the source's pelvis joint when standing: the legs' length plus how far the pelvis
+    joint sits above the hip joints (median over the frames; the rest pose need not stand)."""
+    pos = source.positions()
+    hips = 0.5 * (pos[:, roles["l_hip"], 1] + pos[:, roles["r_hip"], 1])
+    return leg_length(source) + float(np.median(pos[:, roles["pelvis"], 1] - hips))
 
 
 def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
@@ -177,14 +193,13 @@ def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = Fals
     rig = body.rig
     world, roles = _world_rotations(source, rig)
     rot = _to_local(world, np.asarray(rig.parents), source.n_frames)
-    src_rest = source.rest_positions()
     tgt_rest = _rest_pos(rig)
-    src_floor = float(src_rest[:, 1].min())
-    k = _leg_height(tgt_rest, {f"{s}_hip": rig.index(f"upperleg01.{s.upper()}") for s in "lr"}, 0.0) / \
-        _leg_height(src_rest, roles, src_floor)
+    # Leg lengths from the segments, not the rest hip height: a rest pose with splayed legs (or
+    # CC4's, all bones along +y) made strides 4–11 % too long.
+    k = rig_leg_length(rig) / leg_length(source)
     p = source.positions()[:, roles["pelvis"]]
     root = p * k
-    root[:, 1] = tgt_rest[0, 1] + k * (p[:, 1] - (src_rest[roles["pelvis"], 1] - src_floor))
+    root[:, 1] = tgt_rest[0, 1] + k * (p[:, 1] - standing_pelvis_height(source, roles))
     belt = float(source.metadata.get("belt_speed_mps", 0.0))
     meta = {k_: v for k_, v in source.metadata.items() if k_ not in ("roles", "naming")}
     meta.update(source=f"{source.metadata.get('source', 'motion')}→anny", leg_scale=k,
