@@ -1,9 +1,12 @@
-"""Motion benchmark: generation, retargeting and metric times per 4 s clip, and the quality figures.
+"""Motion benchmark: import times per capture; generation, retargeting and metric times per 4 s clip, and
+the quality figures.
 
-Prints, for the 8 actors of Exp 1 and both gaits: generation time, retargeting time onto the actor's
-fitted Anny body, mesh-metric time, and Penetrate / Float / Skate / unstable %; the same for the
-CMU captures retargeted onto every actor; loop seam error; the thesis worked-example error.
-Numbers only, no assertions.
+Prints the BVH import time of every capture in ``../shared/data/mocap`` (both folders; the issue's
+bound is 2 s per capture with loop extraction and clean-up) with what the import detected and
+dropped; then, for the 8 actors of Exp 1 and both gaits: generation time, retargeting time onto the
+actor's fitted Anny body, mesh-metric time, and Penetrate / Float / Skate / unstable %; the same for
+the CMU captures retargeted onto every actor; loop seam error; the thesis worked-example error.
+``--import-only`` stops after the import times. Numbers only, no assertions.
 """
 
 from __future__ import annotations
@@ -14,6 +17,26 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+MOCAP = ROOT.parent / "shared" / "data" / "mocap"
+
+
+def import_times(repeats: int = 3) -> None:
+    """Best-of-``repeats`` wall time of ``read_bvh`` per capture, with the file's size and what was found."""
+    from stimuli.motion.bvh import read_bvh
+
+    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
+    if not files:
+        print(f"import: no captures in {MOCAP} (shared/ sits beside the clone)")
+        return
+    print(f"{'capture':58} {'MB':>5} {'import s':>8} {'fps':>4} {'frames':>6} {'dropped':>7} {'unit':>5} naming")
+    for path in files:
+        best = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            m = read_bvh(path)
+            best = min(best, time.perf_counter() - t0)
+        print(f"{str(path.relative_to(MOCAP)):58} {path.stat().st_size / 1e6:5.2f} {best:8.3f} {m.fps:4.0f} "
+              f"{m.n_frames:6d} {m.metadata['dropped_lead_frames']:7d} {m.metadata['unit']:>5} {m.metadata['naming']}")
 
 
 def main() -> None:
@@ -68,6 +91,10 @@ def main() -> None:
 if __name__ == "__main__":
     import argparse
 
-    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()   # --help, and no stray arguments
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--import-only", action="store_true", help="only the import time per capture")
+    args = parser.parse_args()
     np.set_printoptions(precision=3)
-    main()
+    import_times()
+    if not args.import_only:
+        main()
