@@ -25,7 +25,8 @@ def register(subparsers) -> None:
     p.add_argument("--motions", type=Path, default=None,
                    help="folder written by 'shapemotion physics protocol' (Exp 2's NoCOM and COM motions)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--verify", action="store_true", help="only re-hash the clips of an existing manifest")
+    p.add_argument("--verify", action="store_true",
+                   help="only check the clips of an existing manifest: re-hash and decode every one")
     p.add_argument("--no-survey", action="store_true",
                    help="don't write the design files and survey exports into --out after a complete render")
     p.add_argument("--video-base-url", default=None, help="base URL of the clips in the survey exports")
@@ -52,7 +53,7 @@ def register(subparsers) -> None:
 def run_render(args: argparse.Namespace) -> int:
     from stimuli.errors import StimuliError
     from stimuli.render.manifest import verify_manifest
-    from stimuli.render.pipeline import render_protocol, survey_for_render
+    from stimuli.render.pipeline import disk_full_is_a_user_error, render_protocol, survey_for_render
 
     if args.verify:
         _check_manifest_present(args.out)
@@ -71,7 +72,8 @@ def run_render(args: argparse.Namespace) -> int:
                              source=args.poses, motions_dir=args.motions, warn=lambda line: print(f"warning: {line}"))
     print(report.summary())
     if not args.no_survey:
-        missing, exports = survey_for_render(report, args.video_base_url)
+        with disk_full_is_a_user_error(args.out):
+            missing, exports = survey_for_render(report, args.video_base_url)
         if exports is None:
             print(f"survey: not exported, {len(missing)} stimuli have no clip yet (render them all first)")
         for r in exports or ():

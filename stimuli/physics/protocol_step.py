@@ -15,14 +15,13 @@ import hashlib
 import json
 import os
 import shutil
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.fileio import atomic_write_text, source_digest
+from stimuli.workers import process_pool
 
 
 
@@ -186,8 +185,9 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     progress(f"physics: {len(jobs)} COM motion(s) to simulate, {len(cached)} cached")
     if jobs:
         workers = max(1, min(workers, len(jobs), os.cpu_count() or 1))
-        # spawn, not fork: a fork of a process that has loaded torch/OpenMP can deadlock on its locks
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        # spawned workers (a fork of a process that has loaded torch/OpenMP can deadlock on its locks)
+        # that die with this process (stimuli.workers)
+        with process_pool(workers) as pool:
             for job, report in zip(jobs, pool.map(_job, jobs)):
                 progress(f"  {job['name']}: b {report['b_m'] * 1000:.2f} mm, tracking {report['tracking_rms_deg_overall']:.2f}°, "
                          f"{'FELL' if report['fell'] else 'ok'}")

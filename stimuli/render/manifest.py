@@ -64,8 +64,11 @@ def write_manifest(out_dir: str | Path, rows: list[dict[str, object]]) -> Path:
 
 
 def verify_manifest(out_dir: str | Path) -> list[str]:
-    """Problems found: missing files or SHA-256 mismatches (an empty list means all verified)."""
-    from stimuli.render.video import sha256_file
+    """One line per clip that does not verify (an empty list means all verified): a missing file, a
+    SHA-256 mismatch, or a clip that does not decode to its ``n_frames`` frames — a hash only says
+    the file is the one recorded, and before clips were decoded when written, a clip cut short by a
+    full disk was recorded too."""
+    from stimuli.render.video import decode_problem, sha256_file
 
     out_dir = Path(out_dir)
     problems = []
@@ -73,6 +76,17 @@ def verify_manifest(out_dir: str | Path) -> list[str]:
         path = out_dir / row["file"]
         if not path.exists():
             problems.append(f"{sid}: {row['file']} is missing")
-        elif sha256_file(path) != row["sha256"]:
-            problems.append(f"{sid}: {row['file']} does not match its sha256 in {MANIFEST}")
+            continue
+        found = [f"does not match its sha256 in {MANIFEST}"] if sha256_file(path) != row["sha256"] else []
+        found += [problem for problem in [decode_problem(path, _whole_number(row.get("n_frames")))] if problem]
+        if found:
+            problems.append(f"{sid}: {row['file']} {' and '.join(found)}")
     return problems
+
+
+def _whole_number(text: str | None) -> int | None:
+    """A manifest count, or None when the cell is not one (the frame count is then not checked)."""
+    try:
+        return int(text)
+    except (TypeError, ValueError):
+        return None

@@ -9,11 +9,12 @@ temporary names and renamed, so an interruption never leaves half a file.
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 
 from stimuli.errors import StimuliError
@@ -21,6 +22,7 @@ from stimuli.render.clip import Look
 from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, with_all_columns, write_manifest
 from stimuli.render.settings import inputs_hash, look_for
 from stimuli.render.video import check_interrupted, install_interrupt_handler
+from stimuli.workers import process_pool
 
 SOURCES = ("protocol", "procedural")
 
@@ -174,25 +176,27 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
             rows.pop(job.stimulus.stimulus_id, None)
             todo.append(job)
     out_dir.mkdir(parents=True, exist_ok=True)
-    report.manifest = _update_manifest(out_dir, _ordered(rows, order))
     workers = max(1, min(workers or min(2, os.cpu_count() or 1), len(todo) or 1))
-    previous_handler = install_interrupt_handler()
-    try:
-        for sid, row, error in _run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
-            if row is not None:
-                rows[sid] = row
-                report.rendered.append(sid)
-                report.manifest = write_manifest(out_dir, _ordered(rows, order))
-            else:
-                report.failed[sid] = error
-    finally:
-        if previous_handler is not None:
-            signal.signal(signal.SIGINT, previous_handler)
-    if sheet:
-        from stimuli.render.contact import contact_sheet
+    with output_lock(out_dir), disk_full_is_a_user_error(out_dir, report):
+        sweep_temporaries(out_dir)
+        report.manifest = _update_manifest(out_dir, _ordered(rows, order))
+        previous_handler = install_interrupt_handler()
+        try:
+            for sid, row, error in _run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
+                if row is not None:
+                    rows[sid] = row
+                    report.rendered.append(sid)
+                    report.manifest = write_manifest(out_dir, _ordered(rows, order))
+                else:
+                    report.failed[sid] = error
+        finally:
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
+        if sheet:
+            from stimuli.render.contact import contact_sheet
 
-        posters = [(sid, out_dir / rows[sid]["poster"]) for sid in _ordered_ids(rows, order)]
-        report.contact_sheet = contact_sheet(posters, out_dir / "contact_sheet.png")
+            posters = [(sid, out_dir / rows[sid]["poster"]) for sid in _ordered_ids(rows, order)]
+            report.contact_sheet = contact_sheet(posters, out_dir / "contact_sheet.png")
     if report.failed and strict:
         raise StimuliError(_failure_message(protocol, report))
     return report
@@ -215,6 +219,95 @@ def survey_for_render(report: RenderReport, video_base_url=None) -> tuple[list[s
     return [], export_all(report.out_dir, video_base_url=video_base_url)
 
 
+# Temporary names this package writes into a render folder and renames when complete (mkstemp and
+# mkdtemp add 8 characters of [a-z0-9_]). Left behind only when a process was killed outright.
+TEMPORARY_NAMES = {
+    ".": r"\.(manifest\.csv|contact_sheet\.png|design\.json|conditions\.csv|trials\.csv)\.[a-z0-9_]{8}\.tmp",
+    "clips": r"\..+\.[a-z0-9_]{8}\.tmp",            # video.write_video's private folder per clip
+    "posters": r"\..+\.\d+\.tmp\.png",             # video.write_png: .<name>.<pid>.tmp.png
+    "survey": r"\.(survey\.qsf|survey_qualtrics\.txt|qualtrics_manual_steps\.txt)\.[a-z0-9_]{8}\.tmp"
+              r"|\.jspsych(\.old)?\.[a-z0-9_]{8}",   # stimuli.survey's staging folders
+    "survey/psychopy": r"\..+\.[a-z0-9_]{8}\.tmp",
+}
+
+
+def sweep_temporaries(out_dir: str | Path) -> list[Path]:
+    """Remove what killed runs left in a render folder: only this package's temporary names
+    (:data:`TEMPORARY_NAMES`), only in the folders it writes; returns what was removed.
+
+    Call it only while holding :func:`output_lock` (a running render's temporaries look the same).
+
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> (folder / "clips" / ".a-1.x2_9kq0z.tmp").mkdir(parents=True)
+    >>> (folder / "clips" / "notes.tmp").write_text("yours")
+    5
+    >>> [p.name for p in sweep_temporaries(folder)]
+    ['.a-1.x2_9kq0z.tmp']
+    """
+    import re
+    import shutil
+
+    out_dir = Path(out_dir)
+    removed = []
+    for sub, pattern in TEMPORARY_NAMES.items():
+        folder = out_dir / sub
+        if not folder.is_dir():
+            continue
+        for path in sorted(folder.iterdir()):
+            if not re.fullmatch(pattern, path.name):
+                continue
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+            removed.append(path)
+    return removed
+
+
+@contextmanager
+def output_lock(out_dir: Path):
+    """Hold an exclusive lock on the render folder (``flock`` on the folder itself, so no lock file is
+    left behind, and the kernel drops it however the process ends).
+
+    Two renders into one folder would each take the other's temporary files for leftovers, and race
+    on the manifest; the second is refused. Where ``flock`` does not exist (Windows) nothing is locked.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise StimuliError(f"{out_dir}: another 'shapemotion render' is writing into this folder; let it "
+                               "finish, or render into another --out folder") from None
+        yield
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
+
+
+NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
+
+
+@contextmanager
+def disk_full_is_a_user_error(out_dir: Path, report: RenderReport | None = None):
+    """A full disk (or quota) while rendering or exporting: a StimuliError saying what is kept, not a
+    traceback. Every writer removes its own temporary file first, so nothing half-written is left."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno not in NO_SPACE:
+            raise
+        kept = (f"; the {len(report.rendered)} clip(s) finished in this run are kept and listed in {MANIFEST}"
+                if report is not None else "")
+        raise StimuliError(f"{out_dir}: no space left on the device ({exc.strerror or exc}){kept}; free some space "
+                           "and run the same command again to go on from there") from None
+
+
 def _update_manifest(out_dir: Path, rows: list[dict]) -> Path | None:
     """Write the manifest of the clips kept so far; with none, remove a stale one rather than leave
     an empty file (a CSV without even a header) that later steps would misread."""
@@ -233,20 +326,14 @@ def _ordered(rows: dict, order: list[str]) -> list[dict]:
 
 
 def _worker_signals() -> None:
-    """In a worker: turn SIGTERM into SystemExit, so a clip being written deletes its temporary file,
-    and make Ctrl-C stick (see ``video.install_interrupt_handler``).
+    """In a worker: make Ctrl-C stick (see ``video.install_interrupt_handler``).
 
-    On Ctrl-C a worker that was idle dies of the interrupt; the pool then terminates the others
-    (SIGTERM), which by default would kill them mid-clip and leave the temporary file behind.
+    SIGTERM already raises SystemExit there (``stimuli.workers``): on Ctrl-C a worker that was idle
+    dies of the interrupt and the pool terminates the others, and when this process dies its workers
+    get SIGTERM too; either way a clip being written deletes its temporary folder.
     """
-    import signal
-
     from stimuli.render.video import install_interrupt_handler
 
-    def _exit(signum, frame):
-        raise SystemExit(128 + signum)
-
-    signal.signal(signal.SIGTERM, _exit)
     install_interrupt_handler()
 
 
@@ -263,8 +350,7 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
                 bar.update(1)
                 yield result
             return
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                                 initializer=_worker_signals) as pool:
+        with process_pool(workers, initializer=_worker_signals) as pool:
             pending = {pool.submit(_worker_job, (protocol, job, *source)) for job in jobs}
             try:
                 while pending:
@@ -284,6 +370,10 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
                         except BaseException:
                             continue
                         yield result
+                raise
+            except BaseException:  # an error (a full disk) or the caller stopped reading: render no more
+                for future in pending:
+                    future.cancel()
                 raise
     finally:
         bar.close()
