@@ -9,6 +9,7 @@ scale that splayed rest legs do not change, and unmappable names refused with ex
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -145,6 +146,43 @@ def test_messy_synthetic_file_imports_like_the_clean_one(tmp_path):
     assert any("OFFSET" in note for note in m.metadata["import_notes"])
     assert m.n_frames == walk.n_frames
     assert np.abs(m.positions() - walk.positions()).max() < 1e-3
+
+
+def renamed(sides: dict[str, str], centre: dict[str, str]) -> dict[str, str]:
+    """CMU joint name → another rig's, ``{S}``/``{s}`` standing for the side (L/R, l/r)."""
+    out = dict(centre)
+    for cmu, other in sides.items():
+        for side, letter in (("Left", "L"), ("Right", "R")):
+            out[f"{side}{cmu}"] = other.format(S=letter, s=letter.lower())
+    return out
+
+
+LIMBS = ("UpLeg", "Leg", "Foot", "ToeBase", "Shoulder", "Arm", "ForeArm", "Hand")
+RIGS = {
+    "biped": renamed(dict(zip(LIMBS, ("Bip01 {S} Thigh", "Bip01 {S} Calf", "Bip01 {S} Foot", "Bip01 {S} Toe0",
+                                      "Bip01 {S} Clavicle", "Bip01 {S} UpperArm", "Bip01 {S} Forearm",
+                                      "Bip01 {S} Hand"))),
+                     {"Hips": "Bip01 Pelvis", "LowerBack": "Bip01 Spine", "Neck1": "Bip01 Neck", "Head": "Bip01 Head"}),
+    "daz": renamed(dict(zip(LIMBS, ("{s}Thigh", "{s}Shin", "{s}Foot", "{s}Toe", "{s}Collar", "{s}Shldr", "{s}ForeArm",
+                                    "{s}Hand"))),
+                   {"Hips": "hip", "LowerBack": "abdomen", "Spine1": "chest", "Neck1": "neck", "Head": "head"}),
+    "pattern": renamed(dict(zip(LIMBS, ("thigh_{s}", "shin_{s}", "foot_{s}", "toes_{s}", "clavicle_{s}", "upperarm_{s}",
+                                        "forearm_{s}", "hand_{s}"))), {"Hips": "pelvis", "Head": "head"}),
+}
+
+
+@pytest.mark.parametrize("rig", list(RIGS))
+def test_other_namings_import_the_same_walk(tmp_path, rig):
+    """3ds Max Biped (names with spaces), DAZ and a Blender-like rig: the same roles, the same motion."""
+    text = WALK.read_text()
+    for cmu, other in RIGS[rig].items():
+        text = re.sub(rf"^(\s*(?:ROOT|JOINT)) {cmu}\s*$", rf"\1 {other}", text, flags=re.M)
+    (tmp_path / "rig.bvh").write_text(text)
+    walk, m = read_bvh(WALK), read_bvh(tmp_path / "rig.bvh")
+    assert m.metadata["naming"] == rig
+    assert all(RIGS[rig].get(walk.metadata["roles"][role], walk.metadata["roles"][role]) == joint
+               for role, joint in m.metadata["roles"].items() if role not in ("spine", "chest"))
+    assert np.abs(m.positions() - walk.positions()).max() < 1e-9
 
 
 def test_frame_rates_read_from_frame_time(tmp_path):

@@ -54,20 +54,38 @@ LEG_OVER_STATURE = 0.5
 DEFAULT_HEIGHT_M = 1.75  # assumed body height when the units cannot be recognised
 
 
-def _flatten(root) -> list[tuple[str, int, np.ndarray, list[str], object]]:
-    """Depth-first list of (name, parent index, offset, channels, bvhio joint), end sites included."""
+def _flatten(root, names: list[str] | None = None) -> list[tuple[str, int, np.ndarray, list[str], object]]:
+    """Depth-first list of (name, parent index, offset, channels, bvhio joint), end sites included.
+
+    ``names`` (the joints' names in file order, :func:`_joint_names`) replace bvhio's, which stop at
+    the first space: 3ds Max Biped files name their joints "Bip01 L Thigh". Each must start with
+    bvhio's name, else bvhio's are kept.
+    """
     out: list = []
+    order = iter(names or [])
 
     def visit(joint, parent: int) -> None:
         idx = len(out)
-        out.append((joint.Name, parent, np.array(joint.Offset, float), list(joint.Channels), joint))
+        name = next(order, joint.Name)
+        name = name if name.split()[:1] == [joint.Name] else joint.Name
+        out.append((name, parent, np.array(joint.Offset, float), list(joint.Channels), joint))
         for child in joint.Children:
             visit(child, idx)
         if not joint.Children:
-            out.append((f"{joint.Name}_end", idx, np.array(joint.EndSite, float), [], None))
+            out.append((f"{name}_end", idx, np.array(joint.EndSite, float), [], None))
 
     visit(root, -1)
     return out
+
+
+def _joint_names(text: str) -> list[str]:
+    """The ROOT/JOINT names of a BVH hierarchy in file (depth-first) order, spaces kept.
+
+    >>> _joint_names("HIERARCHY\\nROOT Bip01\\n{\\n JOINT Bip01 L Thigh\\r\\n")
+    ['Bip01', 'Bip01 L Thigh']
+    """
+    hierarchy = text.split("MOTION", 1)[0]
+    return [m.group(2) for m in re.finditer(r"^\s*(ROOT|JOINT)[ \t]+([^\r\n]*?)\s*$", hierarchy, re.M)]
 
 
 def _read_frames(path: Path, n_channels: int) -> tuple[np.ndarray, float]:
@@ -359,7 +377,7 @@ def read_bvh(path: str | Path, mapping: str | Path | None = None, height_m: floa
     except (SyntaxError, ValueError, IndexError, UnicodeDecodeError) as exc:
         line = exc.args[1][1] if isinstance(exc, SyntaxError) and len(exc.args) > 1 else "?"
         raise StimuliError(f"{path}: not a readable BVH file (line {line}: {exc.args[0] if exc.args else exc})") from None
-    joints = _flatten(container.Root)
+    joints = _flatten(container.Root, _joint_names(head))
     n_channels = sum(len(j[3]) for j in joints)
     frames, frame_time = _read_frames(path, n_channels)
     rot, translations = _channel_rotations(frames, joints, path)

@@ -261,6 +261,8 @@ def pattern_roles(joint_names: list[str], parents) -> dict[str, str]:
         pelvis = next(named_pelvis, common[0] if common else None)
         if pelvis is not None:
             roles["pelvis"] = pelvis
+    if "pelvis" not in roles and (pelvis := named(None, PELVIS_WORDS)) is not None:
+        roles["pelvis"] = pelvis   # by name alone: says more where the legs are not found
     head = named(None, ("head",))
     if head is not None:
         roles["head"] = head
