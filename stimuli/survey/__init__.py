@@ -171,7 +171,13 @@ def export_all(folder: str | Path, out_dir: str | Path | None = None,
     format with a note instead of failing the whole export.
     """
     from stimuli.errors import StimuliError
+    from stimuli.survey.psychopy import check_psychopy_text
+    from stimuli.survey.qualtrics_txt import check_txt_text
 
+    # Every format's refusals before the first file, so that a refused protocol leaves no partial set.
+    source = load_source(folder)
+    check_txt_text(source)
+    check_psychopy_text(source)
     out_dir = Path(out_dir) if out_dir is not None else Path(folder) / "survey"
     results = []
     for fmt, name in ALL_OUTPUTS.items():

@@ -37,14 +37,55 @@ their name (``SEX=F|GAIT=walk`` → ``SEX-F_GAIT-walk``).
 
 from __future__ import annotations
 
+import keyword
 import os
 import re
 from pathlib import Path
 
+from stimuli.errors import StimuliError
 from stimuli.fileio import csv_text, write_all_or_nothing
+from stimuli.protocol import shown
 from stimuli.survey.plan import build_plan
 from stimuli.survey.source import StimulusInfo, SurveySource
 from stimuli.survey.text import answer_labels
+
+
+def check_psychopy_text(source: SurveySource) -> None:
+    """Refuse, naming the protocol field, what PsychoPy's conditions files cannot carry unchanged.
+
+    PsychoPy (``data.importConditions``) reads each column header as a Python variable name, runs
+    ``eval`` on any cell that starts with ``[`` and ends with ``]`` (so the cell would be executed as
+    code), and a Builder routine splits ``options`` at ``|`` (a label holding one made an extra option).
+    """
+    p = source.protocol
+    where = source.folder / "design.json"
+    field = "response.labels" if p.response.type == "likert" else "display.labels"
+    labels = answer_labels(p)
+    for index, label in enumerate(labels):
+        if "|" in label:
+            raise StimuliError(f"{where}: protocol field {field}.{index} {shown(label)} holds '|', which separates "
+                               f"the answer options in PsychoPy's options column: the {len(labels)} labels would "
+                               f"make {len('|'.join(labels).split('|'))} options; write the label without '|'")
+    cells = {"response.question": p.response.question, field: "|".join(labels)}
+    for name, text in cells.items():
+        if text.startswith("[") and text.endswith("]"):
+            raise StimuliError(f"{where}: protocol field {name} {shown(text)}: PsychoPy evaluates a conditions cell "
+                               "that starts with '[' and ends with ']' as Python code; reword it (e.g. drop the "
+                               "brackets)")
+    for index, factor in enumerate(p.factors):
+        if factor.role != "alternatives" and not is_psychopy_column(factor.name):
+            raise StimuliError(f"{where}: protocol field factors.{index}.name {shown(factor.name)}: PsychoPy reads "
+                               "conditions columns as Python variable names (letters, digits and '_', not "
+                               "starting with a digit, not a Python keyword); rename the factor")
+
+
+def is_psychopy_column(name: str) -> bool:
+    """Whether PsychoPy accepts ``name`` as a conditions column (a Python variable name).
+
+    >>> is_psychopy_column("BODY"), is_psychopy_column("BODY-TYPE"), is_psychopy_column("2x"), is_psychopy_column("if")
+    (True, False, False, False)
+    """
+    return name.isascii() and name.isidentifier() and not keyword.iskeyword(name)
 
 
 def _name(label: str) -> str:
@@ -65,6 +106,7 @@ def _row(source: SurveySource, s: StimulusInfo, movie_prefix: str) -> dict[str, 
 
 def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, str]:
     """File name (relative to the output folder) → CSV text."""
+    check_psychopy_text(source)
     files: dict[str, str] = {}
     blocks, mains = [], []
     for plan in build_plan(source):

@@ -19,8 +19,11 @@ written as a matrix (items × rank) because the format has no rank-order questio
 from __future__ import annotations
 
 import math
+import re
 
+from stimuli.errors import StimuliError
 from stimuli.orders import block_label
+from stimuli.protocol import shown
 from stimuli.survey.plan import BlockPlan, build_plan, export_tag
 from stimuli.survey.qsf import PROTOCOL_FIELD, ROTATION_FIELD
 from stimuli.survey.qsf_questions import NEXT_AFTER_VIEW_JS
@@ -29,9 +32,45 @@ from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, answer_l
                                  instructions_html, question_html, video_html)
 
 
-def _one_line(html_text: str) -> str:
-    """TXT questions end at a blank line: keep the HTML on one line."""
-    return " ".join(html_text.split())
+# What ends a line of the TXT (Python's str.splitlines set): a question's text, a choice or an answer
+# is one line, and a tag's text runs to its "]]".
+LINE_BREAK = re.compile("[\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029]")
+
+
+def txt_html(html_text: str) -> str:
+    """HTML as one line of the TXT, its brackets as character references.
+
+    A question's text and each choice are one line (a line break in a label made two choices), and a
+    ``[[`` in them could open a tag; in HTML both forms show the same (a line break shows as a space).
+
+    >>> txt_html("<p>Rate it\\n[[Block:x]]</p>")
+    '<p>Rate it &#91;&#91;Block:x&#93;&#93;</p>'
+    """
+    return " ".join(html_text.split()).replace("[", "&#91;").replace("]", "&#93;")
+
+
+def check_txt_text(source: SurveySource) -> None:
+    """Refuse a protocol whose ``name`` the TXT cannot carry unchanged: it is written verbatim into
+    ``[[ED:shapemotion_protocol:…]]`` (the response import matches the recorded name to the design's,
+    so it cannot be escaped), where a line break or a bracket would end the tag and let the rest be
+    read as blocks and questions.
+
+    Everything else of the protocol is HTML here and is escaped (:func:`txt_html`).
+    """
+    name = source.protocol.name
+    if LINE_BREAK.search(name) or "[" in name or "]" in name:
+        raise StimuliError(f"{source.folder / 'design.json'}: protocol field name {shown(name)}: a Qualtrics TXT "
+                           "records it in an [[ED:…]] tag, which a line break, '[' or ']' would end (the rest "
+                           "of the name would be read as blocks and questions); rename the protocol without them")
+
+
+def _tag_text(value: str, what: str) -> str:
+    """A block name or export tag, which the TXT writes inside ``[[…]]``: made of factor levels and actor
+    labels (letters, digits, ``_.+-``), so a line break or bracket here is a protocol the loader let through."""
+    if LINE_BREAK.search(value) or "[" in value or "]" in value:
+        raise StimuliError(f"{what} {shown(value)} (made of the protocol's factor levels and actor labels) holds a "
+                           "line break or a bracket, which would end its [[…]] tag in the Qualtrics TXT")
+    return value
 
 
 class TxtWriter:
@@ -44,17 +83,18 @@ class TxtWriter:
         return video_html(clip_url(self.base_url, stimulus.file), p.clip.width, p.clip.height)
 
     def block(self, name: str) -> None:
-        self.lines += [f"[[Block:{name}]]", ""]
+        self.lines += [f"[[Block:{_tag_text(name, 'block name')}]]", ""]
 
     def page_break(self) -> None:
         self.lines += ["[[PageBreak]]", ""]
 
     def text(self, tag: str, html_text: str) -> None:
-        self.lines += ["[[Question:DB]]", f"[[ID:{tag}]]", _one_line(html_text), ""]
+        self.lines += ["[[Question:DB]]", f"[[ID:{_tag_text(tag, 'export tag')}]]", txt_html(html_text), ""]
 
     def video_question(self, tag: str, stimulus) -> None:
-        labels = [escape(label) for label in answer_labels(self.protocol)]
-        body = _one_line(question_html(self.protocol) + self.clip(stimulus))
+        labels = [txt_html(escape(label)) for label in answer_labels(self.protocol)]
+        tag = _tag_text(tag, "export tag")
+        body = txt_html(question_html(self.protocol) + self.clip(stimulus))
         if self.protocol.response.type == "ranking":
             ranks = [f"{i}" for i in range(1, len(labels) + 1)]
             self.lines += ["[[Question:Matrix]]", f"[[ID:{tag}]]", body, "[[Choices]]", *labels,
@@ -66,6 +106,7 @@ class TxtWriter:
 
 def txt_text(source: SurveySource, video_base_url: str | None = None) -> str:
     """The Advanced Format TXT file of ``source``."""
+    check_txt_text(source)
     w = TxtWriter(source, video_base_url)
     p = source.protocol
     w.lines += [f"[[ED:{PROTOCOL_FIELD}:{p.name}]]", ""]
