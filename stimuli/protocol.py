@@ -34,6 +34,12 @@ MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "paramet
 SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 # Ids, labels, factor names and levels become parts of stimulus ids, file names and column headers.
 MAX_NAME_LENGTH = 40
+# Columns of conditions.csv, trials.csv and the analysis's answer table (analysis.responses.tidy): a
+# factor of one of these names would share its column with the design's own (a between factor called
+# block was overwritten by the block number in trials.csv).
+RESERVED_FACTOR_NAMES = ("participant", "condition_id", "stimulus_id", "practice", "kind", "body_actor",
+                         "motion_actor", "left", "right", "positions", "block", "block_label", "trial",
+                         "repetition", "response", "rating", "chosen", "position", "ranking", "rt", "row")
 # The human ranges of a body (metres, kg/m²): the protocol's actors and the CLI's --height/--bmi/girths.
 HEIGHT_RANGE_M = (1.2, 2.3)
 # A gait's cadence (steps/min) and belt speed (m/s): the protocol's gaits, the generator's
@@ -117,6 +123,9 @@ class Factor(Strict):
         if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", value):
             raise ValueError(f"factor name {shown(value)} must start with a letter and use letters, digits or '_'")
         _check_name_length(value)
+        if value in RESERVED_FACTOR_NAMES:
+            raise ValueError(f"factor name {value!r} is a column of the design or answer files (reserved: "
+                             f"{', '.join(RESERVED_FACTOR_NAMES)}); name the factor otherwise (e.g. {value.upper()})")
         return value
 
     @model_validator(mode="after")

@@ -341,3 +341,10 @@ def test_numbers_still_name_levels():
     """The point-light protocol's strengths 3, 12, 35 … are numbers to YAML and levels as text."""
     p = load_protocol(PROTOCOLS / "thesis_pointlight.yaml")
     assert all(isinstance(level, str) for f in p.factors for level in f.levels)
+
+
+@pytest.mark.parametrize("name", ["block", "trial", "rating", "participant"])
+def test_factor_named_like_a_design_column_is_refused(name, tmp_path, run_cli):
+    """A between factor called ``block`` had its F/M column overwritten by block numbers in trials.csv."""
+    message = refused(run_cli, tmp_path, replace(EXP1, "name: SEX", f"name: {name}"))
+    assert f"factors.0.name (line 27): factor name '{name}' is a column of the design or answer files" in message
