@@ -4,7 +4,10 @@ Output folder: ``clips/<stimulus_id>.mp4``, ``posters/<stimulus_id>.png``, ``man
 ``contact_sheet.png``. A clip whose inputs hash (stimulus, actors, gaits, look, renderer version)
 and file hash match the existing manifest is not rendered again. The manifest is rewritten after
 every finished clip, so an interrupted run keeps what it finished; clips are written under
-temporary names and renamed, so an interruption never leaves half a file.
+temporary names and renamed once they decode, so an interruption or a full disk never leaves half a
+file under a clip's name. What a killed run leaves under temporary names is swept by the next run
+(:func:`sweep_temporaries`), and the workers die with the process that started them
+(``stimuli.workers``).
 """
 
 from __future__ import annotations
@@ -244,6 +247,7 @@ def sweep_temporaries(out_dir: str | Path) -> list[Path]:
     5
     >>> [p.name for p in sweep_temporaries(folder)]
     ['.a-1.x2_9kq0z.tmp']
+    >>> import shutil; shutil.rmtree(folder)
     """
     import re
     import shutil
