@@ -233,13 +233,16 @@ def test_killed_render_leaves_no_process_and_the_rerun_no_partial_file(tiny_prot
     print(f"kill -9 of the main process: all its processes gone {took:.2f} s later")
 
     # kill -9 of the whole group: nobody can clean up, so the next render must.
-    out = tmp_path / "group"
-    render = _start_render_and_wait_for_workers(tiny_protocol, out, limit=3)
-    os.killpg(render.pid, signal.SIGKILL)
-    render.wait()
-    alive, _ = _wait_until_gone(render.pid)
-    assert alive == []
-    left = _leftovers(out)
+    for attempt in range(3):   # a clip can finish between seeing its folder and the kill: then again
+        out = tmp_path / f"group{attempt}"
+        render = _start_render_and_wait_for_workers(tiny_protocol, out, limit=3)
+        os.killpg(render.pid, signal.SIGKILL)
+        render.wait()
+        alive, _ = _wait_until_gone(render.pid)
+        assert alive == []
+        left = _leftovers(out)
+        if left:
+            break
     assert left and all(name.startswith("clips/.") for name in left), left
     (out / "clips" / "notes.tmp.txt").write_text("a file of the user's, not a temporary of the render")
     code, _, err = run_cli(*_render_command(tiny_protocol, out, limit=3)[3:])
