@@ -178,7 +178,7 @@ def decode_problem(path: str | Path, n_frames: int | None = None) -> str:
     """Why the video at ``path`` does not decode completely ('' when it does): every frame of its first
     video stream is decoded by ffmpeg (imageio-ffmpeg's binary) and, with ``n_frames``, counted.
 
-    Decoding a 4-s 720p clip takes about 0.3 s of one core (a tenth of rendering it).
+    Decoding a rendered 4-s 720p clip takes about 0.15 s of one core (rendering it, about 4 s).
 
     >>> decode_problem(__file__).startswith("does not decode: ")   # this Python file is no video
     True
