@@ -45,8 +45,14 @@ def register(subparsers) -> None:
     p.add_argument("source", type=Path)
     p.add_argument("--mapping", type=Path, help="YAML/JSON {role: joint} for unknown skeleton namings")
     p.add_argument("--height", type=float, default=None, help="performer height in m (scales the skeleton)")
-    p.add_argument("--loop", action="store_true", help="trim to whole cycles, put on a treadmill, loop")
+    p.add_argument("--loop", action="store_true",
+                   help="a treadmill loop from the longest steady, straight range of --gait: whole cycles, "
+                        "heading drift removed, on the belt at its own speed")
     p.add_argument("--cycles", type=int, default=None, help="whole cycles to keep when looping")
+    p.add_argument("--gait", choices=("walk", "jog", "run"), default=None,
+                   help="with --loop: the gait to find (jog and run: a running gait); default walk")
+    p.add_argument("--start", type=float, default=None, help="with --loop: search from this time (s)")
+    p.add_argument("--end", type=float, default=None, help="with --loop: search up to this time (s)")
     p.add_argument("--fps", type=float, default=None, help="resample to this frame rate")
     p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_import)
@@ -224,15 +230,16 @@ def _check_npz_out(path: Path, option: str = "--out") -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from stimuli.motion.loop import make_loop
+    from stimuli.motion.loop import capture_loop
 
     src = args.source
     _check_npz_out(args.out)
     positive("--fps", args.fps, "a frame rate > 0")
     in_range("--height", args.height, _height_range(), "m")
     at_least("--cycles", args.cycles, 1)
-    if args.cycles is not None and not args.loop:
-        raise StimuliError("--cycles: only used with --loop (the whole cycles kept in the loop)")
+    for option, value in (("--cycles", args.cycles), ("--gait", args.gait), ("--start", args.start), ("--end", args.end)):
+        if value is not None and not args.loop:
+            raise StimuliError(f"{option}: only used with --loop (it chooses what the loop is made of)")
     if src.suffix.lower() == ".bvh":
         from stimuli.motion.bvh import read_bvh
         m = read_bvh(src, mapping=args.mapping, height_m=args.height)
@@ -246,7 +253,11 @@ def run_import(args: argparse.Namespace) -> int:
     else:
         raise StimuliError(f"{src}: unknown motion format (expected .bvh or an AMASS .npz)")
     if args.loop:
-        m = make_loop(m, cycles=args.cycles)
+        m = capture_loop(m, args.gait or "walk", start_s=args.start, end_s=args.end, cycles=args.cycles)
+        print(f"note: {src.name}: loop of {m.metadata['cycles']} whole cycle(s) from "
+              f"{m.metadata['capture_range_s'][0]:.2f}–{m.metadata['capture_range_s'][1]:.2f} s "
+              f"({m.metadata['capture_segment']}), belt {m.metadata['belt_speed_mps']:.2f} m/s, heading drift "
+              f"{m.metadata['heading_drift_deg_s']:+.1f} deg/s removed", file=sys.stderr)
     if args.fps is not None:
         looped = m.metadata.get("looped")
         m = m.resample(args.fps)

@@ -9,6 +9,10 @@
   dropped so that playing the clip on repeat has no seam.
 * :func:`seam_error` measures how smooth the wrap-around is compared with the clip's interior.
 * :func:`cycles_for_clip` is the whole number of gait cycles that best fills a clip.
+* :func:`capture_loop` makes a treadmill loop from an overground capture: the longest steady,
+  straight range of the requested gait (``steady.capture_segments``), the whole cycles in it whose
+  ends match best, heading drift removed (:func:`turn_path`), put on the belt at its own speed; a
+  capture without such a range is refused, naming the ranges it holds.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ from stimuli.errors import StimuliError
 from stimuli.motion import quat
 from stimuli.motion.events import cycle_starts, gait_events
 from stimuli.motion.motion import Motion
+from stimuli.motion.skeleton import role_indices
+from stimuli.motion.steady import capture_segments, check_gait
 
 UP = np.array([0.0, 1.0, 0.0])
 
@@ -220,3 +226,164 @@ def seam_error(motion: Motion) -> dict:
     step = float(np.percentile(np.linalg.norm(np.diff(p, axis=0), axis=-1).max(axis=1), 99))
     return {"seam_accel_m": seam, "interior_accel_p99_m": interior, "ratio": seam / max(interior, 1e-12),
             "seam_step_m": jump, "interior_step_p99_m": step}
+
+
+# Seam matching: a velocity mismatch of v (m/s) costs like a position mismatch of v × SEAM_TAU_S,
+# about the half-width of close_loop's 0.2-s velocity correction over which it is spread.
+SEAM_TAU_S = 0.1
+# Heel strikes (Zeni) are found within a frame or two; the loop's end may move this far from the
+# heel strike for a closer pose match (a whole cycle stays whole within 0.05 s).
+SEAM_SLACK_S = 0.05
+
+
+def turn_path(motion: Motion, yaw: np.ndarray) -> Motion:
+    """Turn each frame by ``yaw[t]`` radians about the vertical through the root and re-trace the
+    root's horizontal path from the turned frame-to-frame steps (a curve becomes straight when
+    ``yaw`` undoes its heading change; a straight walk curves when it adds one).
+
+    >>> import numpy as np
+    >>> line = Motion(fps=10.0, joint_names=["root"], parents=[-1], offsets=[[0, 0, 0]],
+    ...               rotations=np.tile([1.0, 0, 0, 0], (3, 1, 1)), root_translation=[[0, 1, 0], [0, 1, 1], [0, 1, 2]])
+    >>> turn_path(line, np.full(3, np.pi / 2)).root_translation.round(6).tolist()
+    [[0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]]
+    """
+    yaw = np.asarray(yaw, float)
+    turns = quat.from_axis_angle(UP[None] * yaw[:, None])
+    rot = motion.rotations.copy()
+    rot[:, 0] = quat.mul(turns, rot[:, 0])
+    root = motion.root_translation
+    mid = quat.from_axis_angle(UP[None] * ((yaw[1:] + yaw[:-1]) / 2)[:, None])
+    steps = quat.rotate(mid, np.diff(root, axis=0))
+    path = np.concatenate([root[:1], root[:1] + np.cumsum(steps, axis=0)])
+    return motion.replace(rotations=rot, root_translation=path)
+
+
+def facing_yaw(motion: Motion, positions: np.ndarray | None = None) -> np.ndarray:
+    """Per-frame facing direction of the hips about the vertical (radians, unwrapped; 0 = +z)."""
+    from stimuli.motion.events import facing
+
+    pos = motion.positions() if positions is None else positions
+    fwd = facing(pos, role_indices(motion))
+    return np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
+
+
+def remove_heading_drift(motion: Motion) -> tuple[Motion, float]:
+    """Turn a clip of whole cycles so that its heading stays constant; returns it and the drift
+    removed (deg/s). The drift is the straight-line trend of the hips' facing over time: over whole
+    cycles the pelvis's yaw swing averages out, and a slow curve (constant turning rate) is a trend."""
+    t = np.arange(motion.n_frames) / motion.fps
+    slope = float(np.polyfit(t, facing_yaw(motion), 1)[0]) if motion.n_frames > 2 else 0.0
+    return turn_path(motion, -slope * (t - t.mean())), float(np.degrees(slope))
+
+
+def _seam_features(motion: Motion, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Role joints in the facing frame: positions relative to the pelvis's ground point, and
+    velocities (m/s), so that poses compare wherever and whichever way the walker goes."""
+    roles = role_indices(motion)
+    joints = sorted(set(roles.values()))
+    p = positions[:, joints]
+    yaw = facing_yaw(motion, positions)
+    undo = quat.from_axis_angle(UP[None] * -yaw[:, None])[:, None]
+    ground = positions[:, roles["pelvis"]] * np.array([1.0, 0.0, 1.0])
+    local = quat.rotate(undo, p - ground[:, None])
+    vel = quat.rotate(undo, np.gradient(p, 1.0 / motion.fps, axis=0))
+    return local, vel
+
+
+def best_cycles(motion: Motion, positions: np.ndarray, strikes: dict, cycles: int, lo: int, hi: int) -> tuple[int, int, float]:
+    """First and last frame (inclusive) of the ``cycles`` whole cycles within frames [lo, hi) whose
+    ends match best (pose + SEAM_TAU_S × velocity, RMS over the role joints), and that mismatch (m).
+
+    Every heel strike of either foot may start the loop; its end is the heel strike ``cycles``
+    later of the same foot, moved by up to SEAM_SLACK_S where the pose matches better.
+    """
+    local, vel = _seam_features(motion, positions)
+    slack = int(round(SEAM_SLACK_S * motion.fps))
+    best = (-1, -1, np.inf)
+    for hs in strikes.values():
+        for i in range(len(hs) - cycles):
+            a, end = int(hs[i]), int(hs[i + cycles])
+            ends = np.arange(max(end - slack, a + 4), min(end + slack, hi - 1) + 1)
+            if not len(ends):
+                continue
+            pose = np.sqrt(np.mean(np.sum((local[ends] - local[a]) ** 2, axis=-1), axis=-1))
+            speed = np.sqrt(np.mean(np.sum((vel[ends] - vel[a]) ** 2, axis=-1), axis=-1))
+            score = pose + SEAM_TAU_S * speed
+            k = int(np.argmin(score))
+            if a >= lo and score[k] < best[2]:
+                best = (a, int(ends[k]), float(score[k]))
+    return best
+
+
+def _shifted(segment, frames: int, fps: float):
+    """A segment of a clip cut ``frames`` into the capture, in the capture's time."""
+    from dataclasses import replace
+
+    return replace(segment, start=segment.start + frames, stop=segment.stop + frames,
+                   start_s=segment.start_s + frames / fps, end_s=segment.end_s + frames / fps,
+                   hs={k: v + frames for k, v in segment.hs.items()})
+
+
+def _range_frames(motion: Motion, start_s: float | None, end_s: float | None) -> tuple[int, int]:
+    """Frames [a, b) of a hand-chosen time range; StimuliError naming the range when it is not inside."""
+    where = motion.metadata.get("source", "motion")
+    length = (motion.n_frames - 1) / motion.fps
+    lo = 0.0 if start_s is None else float(start_s)
+    hi = length if end_s is None else float(end_s)
+    if not (0.0 <= lo < hi <= length + 0.5 / motion.fps):
+        raise StimuliError(f"{where}: start/end {lo:g}–{hi:g} s: expected 0 ≤ start < end ≤ {length:.2f} s "
+                           "(the capture's length)")
+    a, b = int(round(lo * motion.fps)), min(int(round(hi * motion.fps)) + 1, motion.n_frames)
+    if b - a < 4:
+        raise StimuliError(f"{where}: start/end {lo:g}–{hi:g} s holds {b - a} frame(s); a loop needs at least 4")
+    return a, b
+
+
+def capture_loop(motion: Motion, gait: str | None = "walk", start_s: float | None = None,
+                 end_s: float | None = None, cycles: int | None = None) -> Motion:
+    """A seamless treadmill loop from an overground capture (see the module docstring).
+
+    The longest steady, straight range of ``gait`` (walk; jog or run: a running gait; None: either)
+    inside ``start_s``–``end_s`` (default: the whole capture) gives the loop: ``cycles`` whole cycles
+    (default: as many as the range holds; more than it holds repeats a divisor of them, as
+    :func:`make_loop` does) starting at the heel strike whose cycles close best, heading drift
+    removed, forward travel subtracted (the belt speed in metadata). StimuliError naming the
+    capture and every range found when no steady range of that gait holds a whole cycle.
+
+    >>> from pathlib import Path
+    >>> from stimuli.motion.bvh import read_bvh
+    >>> walk = read_bvh(Path(__file__).resolve().parents[1] / "data" / "cmu_35_01_walk.bvh")
+    >>> loop = capture_loop(walk, "walk")
+    >>> loop.metadata["cycles"], round(loop.metadata["belt_speed_mps"], 1), loop.metadata["capture_range_s"]
+    (1, 1.3, [0.617, 1.733])
+    """
+    check_gait(gait)
+    where = motion.metadata.get("source", "motion")
+    a, b = _range_frames(motion, start_s, end_s)
+    part = motion.slice(a, b) if (a, b) != (0, motion.n_frames) else motion
+    pos = part.positions()
+    segments = [_shifted(s, a, motion.fps) for s in capture_segments(part, pos)]
+    usable = [s for s in segments if s.matches(gait) and s.cycles >= 1]
+    if not usable:
+        what = "a steady straight " + ("walk or run" if gait is None else "walk" if gait == "walk" else
+                                       f"running gait ({gait})")
+        chosen = "" if start_s is None and end_s is None else f" between {a / motion.fps:.1f} and {(b - 1) / motion.fps:.1f} s"
+        raise StimuliError(f"{where}: no loop: the capture{chosen} holds fewer than one whole gait cycle of {what}. "
+                           f"It holds: {'; '.join(s.describe() for s in segments)}. Choose another gait, or a "
+                           "range with --start/--end (start_s/end_s in a protocol)")
+    seg = max(usable, key=lambda s: (s.duration_s, s.cycles))
+    want = seg.cycles if cycles is None else int(cycles)
+    if want < 1:
+        raise StimuliError(f"{where}: cycles must be >= 1, got {want}")
+    use = want if want <= seg.cycles else max(k for k in range(1, seg.cycles + 1) if want % k == 0)
+    strikes = {k: v - a for k, v in seg.hs.items()}
+    first, last, mismatch = best_cycles(part, pos, strikes, use, seg.start - a, seg.stop - a)
+    clip, drift = remove_heading_drift(part.slice(first, last + 1))
+    clip = to_treadmill(clip)
+    looped = close_loop(clip)
+    looped.metadata.update(
+        cycles=use, cadence_spm=float(120.0 * use / ((clip.n_frames - 1) / clip.fps)), gait=seg.kind if gait is None else gait,
+        speed_mps=float(clip.metadata["belt_speed_mps"]), heading_drift_deg_s=round(drift, 2),
+        capture_range_s=[round((first + a) / motion.fps, 3), round((last + a) / motion.fps, 3)],
+        capture_segment=seg.describe(), seam_mismatch_m=round(mismatch, 4))
+    return repeat(looped, want // use)
