@@ -34,6 +34,10 @@ MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "paramet
 SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 # Ids, labels, factor names and levels become parts of stimulus ids, file names and column headers.
 MAX_NAME_LENGTH = 40
+# The design a protocol may make (counted before it is made): the bundled ones make 1–64 test clips and
+# 96–1,024 test trials; beyond these limits the design alone takes minutes and gigabytes.
+MAX_STIMULI = 100_000
+MAX_TRIALS = 1_000_000
 # Columns of conditions.csv, trials.csv and the analysis's answer table (analysis.responses.tidy): a
 # factor of one of these names would share its column with the design's own (a between factor called
 # block was overwritten by the block number in trials.csv).
@@ -447,6 +451,20 @@ class Assignment(Strict):
     method: Literal["balanced"] = "balanced"
 
 
+class Recruitment(Strict):
+    """Hand-off to a recruitment platform for ``shapemotion serve``: where a finished participant is sent.
+
+    ``completion_url`` may hold ``{code}``; for Prolific it defaults to Prolific's completion address.
+    ``participant_param`` names the URL parameter that carries a platform's participant id
+    (Prolific: ``PROLIFIC_PID``).
+    """
+
+    platform: Literal["prolific", "other"] = "prolific"
+    completion_code: str = Field(default="", max_length=200, pattern=r"^[A-Za-z0-9_-]*$")
+    completion_url: str = Field(default="", max_length=2000, pattern=r"^(https?://\S*)?$")
+    participant_param: str = Field(default="", max_length=100, pattern=r"^[A-Za-z0-9_]*$")
+
+
 class Analysis(Strict):
     dependent_measure: Literal["mean_rating", "percent_chosen", "votes", "rank_points"]
     alpha: float = Field(default=0.05, gt=0, lt=1)
@@ -479,6 +497,7 @@ class Protocol(Strict):
     analysis: Analysis
     consent: str = ""
     source: str = ""
+    recruitment: Recruitment | None = None   # shapemotion serve's platform hand-off; None: none
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -524,6 +543,8 @@ class Protocol(Strict):
         for key in ("followup", "adjust", "means"):               # and the post-hoc settings
             if getattr(self.analysis, key) is None:
                 del data["analysis"][key]
+        if self.recruitment is None:                              # and the serve hand-off
+            del data["recruitment"]
         return data
 
 
@@ -547,6 +568,7 @@ def check_consistency(p: Protocol) -> None:
         raise ValueError("response.type: 'afc' needs a factor with role 'alternatives' (the choices)")
     if p.response.type == "ranking" and not alternatives:
         raise ValueError("response.type: 'ranking' needs a factor with role 'alternatives' (what is ranked)")
+    _check_design_size(p)
     _check_actor_labels(p)
     _check_arrangement_ids(p)
     for name in p.blocks.by:
@@ -573,6 +595,50 @@ def check_consistency(p: Protocol) -> None:
         raise ValueError(
             f"participants: {p.participants} participants cannot be balanced over {between_cells} between-subject "
             f"groups; use a multiple of {between_cells}")
+
+
+def _check_design_size(p: Protocol) -> None:
+    """The design a protocol makes must fit :data:`MAX_STIMULI` test clips and :data:`MAX_TRIALS` test
+    trials, counted without making them: ten alternatives with ``arrangements: all`` (10! screen
+    orders) made a 3 KB protocol run ``validate`` past a minute and gigabytes."""
+    alternatives = p.factors_with_role("alternatives")
+    k = len(alternatives[0].levels) if alternatives else 0
+    kind = p.alternatives.arrangements
+    orders = 1 if not alternatives or kind == "fixed" else k if kind == "latin_square" and k > 2 else math.factorial(k)
+    stimuli = math.prod(len(f.levels) for f in p.factors if f.role != "alternatives") * orders
+    if stimuli > MAX_STIMULI:
+        crossing = " × ".join(f"{f.name} {len(f.levels):,}" for f in p.factors if f.role != "alternatives")
+        shown_orders = f" × {_count_text(orders)} screen orders of {alternatives[0].name}" if orders > 1 else ""
+        hint = (f"; arrangements: latin_square shows each of the {k} levels once in each position in {k} orders"
+                if kind == "all" and k > 2 else "")
+        raise ValueError(f"factors: the design makes {_count_text(stimuli)} test clips ({crossing}{shown_orders}); "
+                         f"a protocol may make at most {MAX_STIMULI:,}{hint}")
+    check_trial_count(p, p.participants, "participants")
+
+
+def check_trial_count(p: Protocol, participants: int, field: str) -> None:
+    """``participants`` × the test trials each sees must fit :data:`MAX_TRIALS` (also run on
+    ``design --participants``, which overrides the protocol's number).
+
+    >>> check_trial_count(load_protocol("protocols/exp1_shape_motion.yaml"), 10**6, "--participants")
+    Traceback (most recent call last):
+    ...
+    ValueError: --participants: 1,000,000 participants × 64 test trials each make 64,000,000 rows of trials.csv; a protocol may make at most 1,000,000
+    """
+    per_participant = math.prod(len(f.levels) for f in p.factors_with_role("within")) * p.repetitions
+    alternatives = p.factors_with_role("alternatives")
+    if alternatives and p.alternatives.counterbalance == "within":
+        k, kind = len(alternatives[0].levels), p.alternatives.arrangements
+        per_participant *= 1 if kind == "fixed" else k if kind == "latin_square" and k > 2 else math.factorial(k)
+    if per_participant * participants > MAX_TRIALS:
+        raise ValueError(f"{field}: {participants:,} participants × {_count_text(per_participant)} test trials each "
+                         f"make {_count_text(per_participant * participants)} rows of trials.csv; a protocol may "
+                         f"make at most {MAX_TRIALS:,}")
+
+
+def _count_text(count: int) -> str:
+    """A count for a message: digits while readable, else its order of magnitude (20,000! has 77,338 digits)."""
+    return f"{count:,}" if count < 10**15 else f"about 10^{len(str(count)) - 1}"
 
 
 def _check_actor_labels(p: Protocol) -> None:

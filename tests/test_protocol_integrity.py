@@ -348,3 +348,26 @@ def test_factor_named_like_a_design_column_is_refused(name, tmp_path, run_cli):
     """A between factor called ``block`` had its F/M column overwritten by block numbers in trials.csv."""
     message = refused(run_cli, tmp_path, replace(EXP1, "name: SEX", f"name: {name}"))
     assert f"factors.0.name (line 27): factor name '{name}' is a column of the design or answer files" in message
+
+
+def test_alternatives_with_every_order_that_no_design_could_hold(tmp_path, run_cli):
+    """Ten alternatives with 'arrangements: all' (10! orders) ran validate past a minute and gigabytes."""
+    text = (PROTOCOLS / "thesis_mesh.yaml").read_text()
+    text = replace(text, 'levels: ["0.5", "12", "23.5", "35", "46.5", "58"]',
+                   'levels: ["0.5", "5", "12", "20", "23.5", "30", "35", "40", "46.5", "58"]')
+    text = replace(text, "arrangements: latin_square", "arrangements: all")
+    text = replace(text, "labels: [A, B, C, D, E, F]", "labels: [A, B, C, D, E, F, G, H, I, J]")
+    start = time.perf_counter()
+    message = refused(run_cli, tmp_path, text, "validate")
+    assert time.perf_counter() - start < 2.0
+    assert "the design makes 36,288,000 test clips (PARAMETER 10 × 3,628,800 screen orders of STRENGTH)" in message
+    assert "at most 100,000" in message and "latin_square" in message
+
+
+def test_participants_beyond_the_trial_limit(tmp_path, run_cli):
+    message = refused(run_cli, tmp_path, replace(EXP1, "participants: 16 ", "participants: 20000 "), "validate")
+    assert "participants (line 8): 20,000 participants × 64 test trials each make 1,280,000 rows" in message
+    out = tmp_path / "out"
+    code, _, stderr = run_cli("design", PROTOCOLS / "exp1_shape_motion.yaml", "--participants", "1000000", "--out", out)
+    assert code == 2 and "--participants: 1,000,000 participants × 64 test trials" in " ".join(stderr.split())
+    assert not out.exists()

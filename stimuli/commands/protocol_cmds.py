@@ -63,10 +63,17 @@ def print_notes(lines: list[str], kind: str) -> None:
 def run_design(args: argparse.Namespace) -> int:
     from stimuli.design import build_design, write_design
     from stimuli.fileio import check_output_dir
-    from stimuli.protocol import load_protocol
+    from stimuli.errors import StimuliError
+    from stimuli.protocol import check_trial_count, load_protocol
 
     check_output_dir(args.out)
-    design = build_design(load_protocol(args.protocol), args.participants, args.seed)
+    protocol = load_protocol(args.protocol)
+    if args.participants is not None:
+        try:
+            check_trial_count(protocol, args.participants, "--participants")
+        except ValueError as exc:
+            raise StimuliError(str(exc)) from None
+    design = build_design(protocol, args.participants, args.seed)
     for path in write_design(design, args.out):
         print(path)
     print_notes(design.notes, "note")
