@@ -267,13 +267,28 @@ def facing_yaw(motion: Motion, positions: np.ndarray | None = None) -> np.ndarra
     return np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
 
 
-def remove_heading_drift(motion: Motion) -> tuple[Motion, float]:
-    """Turn a clip of whole cycles so that its heading stays constant; returns it and the drift
-    removed (deg/s). The drift is the straight-line trend of the hips' facing over time: over whole
-    cycles the pelvis's yaw swing averages out, and a slow curve (constant turning rate) is a trend."""
+def remove_heading_drift(motion: Motion, cycles: int) -> tuple[Motion, float]:
+    """Turn a clip of ``cycles`` whole cycles so that it travels along one constant direction;
+    returns it and the mean drift removed (deg/s).
+
+    The root's path is averaged over one stride (a moving window of one cycle), which removes each
+    step's sideways sway; a quadratic in time fitted to what is left is the slow curve, and each
+    frame is turned back by its direction's departure from the mean direction, so the path becomes
+    straight. One cycle holds no curve to tell from the sway: it is only faced forward (the belt's
+    straight-line fit removes a constant sideways drift).
+    """
+    if cycles < 2:
+        return motion, 0.0
     t = np.arange(motion.n_frames) / motion.fps
-    slope = float(np.polyfit(t, facing_yaw(motion), 1)[0]) if motion.n_frames > 2 else 0.0
-    return turn_path(motion, -slope * (t - t.mean())), float(np.degrees(slope))
+    w = max(int(round((motion.n_frames - 1) / cycles)), 1)
+    kernel = np.ones(w) / w
+    tc = np.convolve(t, kernel, mode="valid")
+    root = motion.root_translation
+    dx, dz = (np.polyval(np.polyder(np.polyfit(tc, np.convolve(root[:, k], kernel, mode="valid"), 2)), t)
+              for k in (0, 2))
+    heading = np.unwrap(np.arctan2(dx, dz))
+    turned = turn_path(motion, -(heading - heading.mean()))
+    return turned, float(np.degrees(heading[-1] - heading[0]) / max(t[-1], 1e-9))
 
 
 def _seam_features(motion: Motion, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -290,28 +305,40 @@ def _seam_features(motion: Motion, positions: np.ndarray) -> tuple[np.ndarray, n
     return local, vel
 
 
-def best_cycles(motion: Motion, positions: np.ndarray, strikes: dict, cycles: int, lo: int, hi: int) -> tuple[int, int, float]:
-    """First and last frame (inclusive) of the ``cycles`` whole cycles within frames [lo, hi) whose
-    ends match best (pose + SEAM_TAU_S × velocity, RMS over the role joints), and that mismatch (m).
+def stride_frames(strikes: dict) -> float:
+    """Median frames from one heel strike to the next of the same foot."""
+    gaps = np.concatenate([np.diff(np.sort(v)) for v in strikes.values()] + [np.zeros(0)])
+    if not len(gaps):
+        raise StimuliError("motion: no whole gait cycle (fewer than two heel strikes of one foot)")
+    return float(np.median(gaps))
 
-    Every heel strike of either foot may start the loop; its end is the heel strike ``cycles``
-    later of the same foot, moved by up to SEAM_SLACK_S where the pose matches better.
+
+def best_cycles(motion: Motion, positions: np.ndarray, strikes: dict, cycles: int, lo: int, hi: int) -> tuple[int, int, float]:
+    """First and last frame (inclusive) of ``cycles`` whole cycles within frames [lo, hi) whose ends
+    match best (pose + SEAM_TAU_S × velocity, RMS over the role joints), and that mismatch (m).
+
+    A loop may start at any phase of the stride (a seam at heel strike meets the foot's sharpest
+    deceleration); it lasts ``cycles`` median strides (heel strike to heel strike of one foot),
+    give or take SEAM_SLACK_S where the pose matches better.
     """
     local, vel = _seam_features(motion, positions)
+    span = stride_frames(strikes) * cycles
     slack = int(round(SEAM_SLACK_S * motion.fps))
     best = (-1, -1, np.inf)
-    for hs in strikes.values():
-        for i in range(len(hs) - cycles):
-            a, end = int(hs[i]), int(hs[i + cycles])
-            ends = np.arange(max(end - slack, a + 4), min(end + slack, hi - 1) + 1)
-            if not len(ends):
-                continue
-            pose = np.sqrt(np.mean(np.sum((local[ends] - local[a]) ** 2, axis=-1), axis=-1))
-            speed = np.sqrt(np.mean(np.sum((vel[ends] - vel[a]) ** 2, axis=-1), axis=-1))
-            score = pose + SEAM_TAU_S * speed
-            k = int(np.argmin(score))
-            if a >= lo and score[k] < best[2]:
-                best = (a, int(ends[k]), float(score[k]))
+    for a in range(lo, hi):
+        end = int(round(a + span))
+        if end - slack > hi - 1:
+            break
+        ends = np.arange(end - slack, min(end + slack, hi - 1) + 1)
+        pose = np.sqrt(np.mean(np.sum((local[ends] - local[a]) ** 2, axis=-1), axis=-1))
+        speed = np.sqrt(np.mean(np.sum((vel[ends] - vel[a]) ** 2, axis=-1), axis=-1))
+        score = pose + SEAM_TAU_S * speed
+        k = int(np.argmin(score))
+        if score[k] < best[2]:
+            best = (a, int(ends[k]), float(score[k]))
+    if best[0] < 0:
+        raise StimuliError(f"{motion.metadata.get('source', 'motion')}: frames {lo}–{hi - 1} hold fewer than "
+                           f"{cycles} whole gait cycle(s)")
     return best
 
 
@@ -355,7 +382,7 @@ def capture_loop(motion: Motion, gait: str | None = "walk", start_s: float | Non
     >>> walk = read_bvh(Path(__file__).resolve().parents[1] / "data" / "cmu_35_01_walk.bvh")
     >>> loop = capture_loop(walk, "walk")
     >>> loop.metadata["cycles"], round(loop.metadata["belt_speed_mps"], 1), loop.metadata["capture_range_s"]
-    (1, 1.3, [0.617, 1.733])
+    (1, 1.3, [0.983, 2.108])
     """
     check_gait(gait)
     where = motion.metadata.get("source", "motion")
@@ -378,7 +405,7 @@ def capture_loop(motion: Motion, gait: str | None = "walk", start_s: float | Non
     use = want if want <= seg.cycles else max(k for k in range(1, seg.cycles + 1) if want % k == 0)
     strikes = {k: v - a for k, v in seg.hs.items()}
     first, last, mismatch = best_cycles(part, pos, strikes, use, seg.start - a, seg.stop - a)
-    clip, drift = remove_heading_drift(part.slice(first, last + 1))
+    clip, drift = remove_heading_drift(part.slice(first, last + 1), use)
     clip = to_treadmill(clip)
     looped = close_loop(clip)
     looped.metadata.update(
