@@ -6,7 +6,9 @@ bound is 2 s per capture with loop extraction and clean-up) with what the import
 dropped; then, for the 8 actors of Exp 1 and both gaits: generation time, retargeting time onto the
 actor's fitted Anny body, mesh-metric time, and Penetrate / Float / Skate / unstable %; the same for
 the CMU captures retargeted onto every actor; loop seam error; the thesis worked-example error.
-``--import-only`` stops after the import times. Numbers only, no assertions.
+``--import-only`` stops after the import times; ``--loop-only`` prints, per capture, import + loop
+extraction (``capture_loop``: steady-range search, best-closing cycles, heading drift, belt) and what
+the loop took, then stops. Numbers only, no assertions.
 """
 
 from __future__ import annotations
@@ -37,6 +39,34 @@ def import_times(repeats: int = 3) -> None:
             best = min(best, time.perf_counter() - t0)
         print(f"{str(path.relative_to(MOCAP)):58} {path.stat().st_size / 1e6:5.2f} {best:8.3f} {m.fps:4.0f} "
               f"{m.n_frames:6d} {m.metadata['dropped_lead_frames']:7d} {m.metadata['unit']:>5} {m.metadata['naming']}")
+
+
+def loop_times(repeats: int = 3) -> None:
+    """Best-of-``repeats`` wall time of import + ``capture_loop`` per capture (walk, or jog for the
+    runs and jogs), with the loop's range, cycles, belt speed and seam, or the refusal."""
+    from stimuli.errors import StimuliError
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import capture_loop, seam_error
+
+    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
+    print(f"{'capture':58} {'import s':>8} {'loop s':>6} {'total s':>7}  loop")
+    for path in files:
+        gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+        best_import = best_loop = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            m = read_bvh(path)
+            t1 = time.perf_counter()
+            try:
+                loop = capture_loop(m, gait)
+                what = (f"{gait} {loop.metadata['capture_range_s'][0]:.2f}-{loop.metadata['capture_range_s'][1]:.2f} s, "
+                        f"{loop.metadata['cycles']} cycle(s), belt {loop.metadata['belt_speed_mps']:.2f} m/s, "
+                        f"seam ratio {seam_error(loop)['ratio']:.2f}")
+            except StimuliError as exc:
+                what = "refused: " + str(exc).split(": no loop: ")[-1][:90] + "…"
+            t2 = time.perf_counter()
+            best_import, best_loop = min(best_import, t1 - t0), min(best_loop, t2 - t1)
+        print(f"{str(path.relative_to(MOCAP)):58} {best_import:8.3f} {best_loop:6.3f} {best_import + best_loop:7.3f}  {what}")
 
 
 def main() -> None:
@@ -93,8 +123,12 @@ if __name__ == "__main__":
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--import-only", action="store_true", help="only the import time per capture")
+    parser.add_argument("--loop-only", action="store_true", help="only import + loop extraction per capture")
     args = parser.parse_args()
     np.set_printoptions(precision=3)
-    import_times()
-    if not args.import_only:
-        main()
+    if args.loop_only:
+        loop_times()
+    else:
+        import_times()
+        if not args.import_only:
+            main()
