@@ -191,5 +191,6 @@ def test_a_slow_curve_is_straightened():
     assert [s.kind for s in capture_segments(curved)] == ["walk"]
     loop = capture_loop(curved, "walk")
     assert loop.metadata["heading_drift_deg_s"] == pytest.approx(10.0, abs=1.5)
-    assert np.ptp(loop.root_translation[:, 0]) < 0.08
+    # sideways: the walk's own sway (7.2 cm) and 1 cm more; left curved it wandered 52 cm
+    assert np.ptp(loop.root_translation[:, 0]) < np.ptp(one.root_translation[:, 0]) + 0.01
     assert loop.metadata["belt_speed_mps"] == pytest.approx(1.3, rel=0.05)
