@@ -31,7 +31,7 @@ from stimuli.errors import StimuliError
 
 # What a factor's levels mean on screen.
 MapsTo = Literal["sex", "gait", "body", "motion", "method", "strength", "parameter", "source", "view", "none"]
-SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+SAFE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")   # used with fullmatch: "$" would let a trailing newline through
 # Ids, labels, factor names and levels become parts of stimulus ids, file names and column headers.
 MAX_NAME_LENGTH = 40
 # The design a protocol may make (counted before it is made): the bundled ones make 1–64 test clips and
@@ -96,7 +96,7 @@ class Actor(Strict):
     @field_validator("id", "label")
     @classmethod
     def _safe(cls, value: str) -> str:
-        if not SAFE_ID.match(value):
+        if not SAFE_ID.fullmatch(value):
             raise ValueError(f"{shown(value)} must use letters, digits, '_', '-', '.' or '+' only")
         _check_name_length(value)
         return value
@@ -124,7 +124,7 @@ class Factor(Strict):
     @field_validator("name")
     @classmethod
     def _name(cls, value: str) -> str:
-        if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", value):
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", value):
             raise ValueError(f"factor name {shown(value)} must start with a letter and use letters, digits or '_'")
         _check_name_length(value)
         if value in RESERVED_FACTOR_NAMES:
@@ -137,7 +137,7 @@ class Factor(Strict):
         if len(set(self.levels)) != len(self.levels):
             raise ValueError(f"levels of {self.name} repeat: {shown(self.levels)}")
         for level in self.levels:
-            if not SAFE_ID.match(level):
+            if not SAFE_ID.fullmatch(level):
                 raise ValueError(f"level {shown(level)} of {self.name} must use letters, digits, '_', '-', '.' or '+'")
             _check_name_length(level)
         _check_stimulus_id_parts(self)
@@ -498,6 +498,15 @@ class Protocol(Strict):
     consent: str = ""
     source: str = ""
     recruitment: Recruitment | None = None   # shapemotion serve's platform hand-off; None: none
+
+    @field_validator("name")
+    @classmethod
+    def _one_line_name(cls, value: str) -> str:
+        # The name is written verbatim into survey syntax (Qualtrics' [[ED:…]] line) and matched by the
+        # response import: a line break or control character would split or inject lines there.
+        if not value.strip() or any(ord(c) < 32 or ord(c) == 127 for c in value):
+            raise ValueError(f"name {shown(value)} must be one line of text without control characters")
+        return value
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -700,7 +709,7 @@ def _check_practice(p: Protocol, names: list[str]) -> None:
         repeated = sorted({level for level in levels if levels.count(level) > 1})
         if repeated:
             raise ValueError(f"{where}: levels repeat: {shown(repeated)} (each practice level is one set of clips)")
-        unsafe = [level for level in levels if not SAFE_ID.match(level)]
+        unsafe = [level for level in levels if not SAFE_ID.fullmatch(level)]
         if unsafe:
             raise ValueError(f"{where}: level {shown(unsafe[0])} must use letters, digits, '_', '-', '.' or '+'")
         for level in levels:

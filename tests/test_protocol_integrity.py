@@ -307,9 +307,11 @@ def test_control_character_is_a_message_with_its_line(tmp_path, run_cli):
 
 @pytest.mark.parametrize("args", [["bodies", "--protocol", "protocols/exp1_shape_motion.yaml"],
                                   ["motion", "generate"], ["physics", "retarget"],
-                                  ["survey", "protocols", "--format", "jspsych"]])
+                                  ["survey", "protocols", "--format", "jspsych"],
+                                  ["render", "protocols/exp1_shape_motion.yaml"],
+                                  ["preview", "--gait", "walk", "--body", "sex=M,height=1.8,bmi=25"]])
 def test_empty_out_is_refused_by_other_commands(args, capsys):
-    """The same argparse type guards every --out of the stimuli commands (render's is its owner's)."""
+    """The same argparse type guards every --out of the stimuli commands."""
     from stimuli.cli import main
 
     with pytest.raises(SystemExit) as info:
@@ -371,3 +373,12 @@ def test_participants_beyond_the_trial_limit(tmp_path, run_cli):
     code, _, stderr = run_cli("design", PROTOCOLS / "exp1_shape_motion.yaml", "--participants", "1000000", "--out", out)
     assert code == 2 and "--participants: 1,000,000 participants × 64 test trials" in " ".join(stderr.split())
     assert not out.exists()
+
+
+@pytest.mark.parametrize("old, new", [("name: exp1_shape_motion", "name: \"exp1_shape_motion\\n\""),
+                                      ("- name: GAIT", "- name: \"GAIT\\n\"")])
+def test_a_trailing_newline_is_not_a_safe_name(tmp_path, run_cli, old, new):
+    """Names go into file names, ids and survey syntax; a regex anchored with "$" let "walk\\n" through."""
+    assert old in EXP1
+    message = refused(run_cli, tmp_path, replace(EXP1, old, new), "validate")
+    assert "line" in message

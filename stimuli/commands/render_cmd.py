@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from stimuli.fileio import output_path
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("render", help="render every stimulus clip of a protocol (resumable)",
@@ -12,7 +14,7 @@ def register(subparsers) -> None:
                                           "into clips/*.mp4, posters/*.png, manifest.csv and contact_sheet.png. "
                                           "Clips already rendered with the same inputs are kept.")
     p.add_argument("protocol", type=Path, nargs="?", help="protocol YAML (not needed with --verify)")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=output_path, required=True, help="output folder")
     p.add_argument("--resolution", default=None, help="WIDTHxHEIGHT (default: the protocol's clip size)")
     p.add_argument("--fps", type=int, default=None, help="frames per second (default: the protocol's)")
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: 2, or fewer cores)")
@@ -41,7 +43,7 @@ def register(subparsers) -> None:
     source.add_argument("--stepping", action="store_true", help="a simple procedural stepping pose")
     p.add_argument("--body", required=True, help="sex=M,height=1.80,bmi=25")
     p.add_argument("--layout", choices=["treadmill", "point_light"], default="treadmill")
-    p.add_argument("--out", type=Path, required=True, help="output .mp4 (a poster .png is written next to it)")
+    p.add_argument("--out", type=output_path, required=True, help="output .mp4 (a poster .png is written next to it)")
     p.add_argument("--resolution", default="1280x720")
     p.add_argument("--fps", type=int, default=30)
     p.add_argument("--duration", type=float, default=4.0, help="seconds")
