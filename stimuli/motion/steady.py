@@ -59,7 +59,7 @@ SPEED_TOL = 0.10          # about 3x the 2-4 % stride-to-stride speed variation 
 MIN_RANGE_S = 0.4         # shorter than one walking step: merged into its neighbours
 STILL_FRACTION = 0.2      # a planted foot moves < 20 % of the body's speed (a swinging foot 100-300 %)
 STILL_MPS = 0.3           # ... and < 0.3 m/s at the slowest walks (the contact speed of events.contacts)
-RUN_FLIGHT = 0.15         # walks read 0.01-0.09 'no foot still', jogs and runs 0.25-0.65
+RUN_FLIGHT = 0.15         # walks here read 0-0.12 'no foot still', jogs and runs 0.24-0.65
 RUNNING_GAITS = ("jog", "run")
 GAITS = ("walk",) + RUNNING_GAITS
 
@@ -225,8 +225,8 @@ def flight_fraction(motion, positions: np.ndarray, speed_mps: float) -> float:
     horizontally faster than ``STILL_FRACTION`` of the body's speed (and than ``STILL_MPS``).
 
     A walk always has a foot planted (single or double support): only the heel-to-toe roll at the
-    changeover reads as 'no foot still' (1–9 % of frames on the walks in ``shared/data/mocap``). A
-    run's flight phases leave neither foot still (25–65 % on its jogs and runs).
+    changeover reads as 'no foot still' (0–12 % of frames on the walks in ``shared/data/mocap``). A
+    run's flight phases leave neither foot still (24–65 % on its jogs and runs).
     """
     from stimuli.motion.events import foot_points
 
