@@ -91,6 +91,8 @@ def register(subparsers) -> None:
     p.add_argument("motion", type=Path)
     p.add_argument("--body", required=True, help="sex=M,height=1.80,bmi=25")
     p.add_argument("--keep-speed", action="store_true", help="keep the belt speed (no stride scaling)")
+    p.add_argument("--foot-lock", action="store_true",
+                   help="after the clean-up, the whole-clip foot-locking solve (IK with mink; docs/readme_motion.md)")
     p.add_argument("--out", type=output_path, required=True)
     p.set_defaults(func=run_retarget)
 
@@ -359,7 +361,11 @@ def run_retarget(args: argparse.Namespace) -> int:
     from stimuli.motion.retarget import retarget
 
     _check_npz_out(args.out)
-    print(retarget(_load(args.motion), _fit(args.body), keep_speed=args.keep_speed).save(args.out))
+    out = retarget(_load(args.motion), _fit(args.body), keep_speed=args.keep_speed, foot_lock=args.foot_lock)
+    print(out.save(args.out))
+    meta = out.metadata
+    print(f"joint change from the retargeted source: largest {meta['joint_change_max_deg']:.1f}°, "
+          f"RMS {meta['joint_change_rms_deg']:.1f}°", file=sys.stderr)
     return 0
 
 

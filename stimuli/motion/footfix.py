@@ -613,3 +613,207 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
     target[todo] = _turn_about(pivot, arm, axis, angle)
     foot[todo] = quat.mul(quat.from_axis_angle(axis * angle[:, None]), foot[todo])
     return target, foot
+
+
+# ---------------------------------------------------------------------------- whole-clip foot locking
+# Time constants of the foot-locking solve, in seconds (the same at any frame rate): how fast a
+# correction fades once a foot leaves the ground, and how fast a landing foot settles onto the floor.
+LOCK_RELEASE_S = 0.12
+LOCK_SETTLE_S = 0.03
+# Task weights: contact points pinned hard, the pelvis lightly held to its source path, every joint
+# pulled towards its source angle (so that joints change no more than the pins need).
+LOCK_PIN_COST = 100.0
+LOCK_PELVIS_COST = (5.0, 1.0)
+LOCK_POSTURE_COST = 1.0
+# Joints other than hip, knee and ankle (toes, twist bones, a pelvis-to-hip bone) change reluctantly:
+# free toes spun 58° to keep heel, ball and toe tip all on their footprints.
+LOCK_OTHER_POSTURE_COST = 10.0
+LOCK_ITERATIONS = 4
+# Largest knee flexion the solve may leave (degrees; 0 = straight).
+KNEE_LIMIT_DEG = 160.0
+
+
+def _leg_joints(motion: Motion, points: dict) -> list[int]:
+    """The joints from the root down to every joint carrying a sole point (sorted, root first)."""
+    keep = {0}
+    for pts in points.values():
+        for j, _ in pts:
+            while j > 0 and j not in keep:
+                keep.add(j)
+                j = int(motion.parents[j])
+    return sorted(keep)
+
+
+def leg_model_xml(motion: Motion, points: dict) -> tuple[str, list[int]]:
+    """MJCF of the motion's root and leg chains (ball joints, a free root, one site per sole
+    point), and the motion joints it holds in body order. Rest pose = identity rotations, as in
+    :class:`~stimuli.motion.motion.Motion`."""
+    joints = _leg_joints(motion, points)
+    kids = {j: [k for k in joints if k > 0 and motion.parents[k] == j] for j in joints}
+    sites = {j: [] for j in joints}
+    for s, pts in points.items():
+        for i, (j, off) in enumerate(pts):
+            sites[j].append((f"{s}{i}", off))
+
+    def body(j: int, depth: int) -> str:
+        pad = "  " * depth
+        pos = "0 0 0" if j == 0 else " ".join(f"{v:.6g}" for v in motion.offsets[j])
+        joint = '<freejoint name="j0"/>' if j == 0 else f'<joint name="j{j}" type="ball"/>'
+        inner = [f'{pad}  {joint}', f'{pad}  <geom type="sphere" size="0.01" mass="1" contype="0" conaffinity="0"/>']
+        inner += [f'{pad}  <site name="{n}" pos="{" ".join(f"{v:.6g}" for v in off)}"/>' for n, off in sites[j]]
+        inner += [body(k, depth + 1) for k in kids[j]]
+        return f'{pad}<body name="b{j}" pos="{pos}">\n' + "\n".join(inner) + f"\n{pad}</body>"
+
+    return f'<mujoco><worldbody>\n{body(0, 1)}\n</worldbody></mujoco>', joints
+
+
+def joint_change_deg(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
+    """Largest and RMS rotation (degrees) between two sets of local joint rotations (T×J×4); the RMS
+    over the frames of the joints that changed at all (a rig's untouched fingers would dilute it).
+
+    >>> q = np.tile([1.0, 0, 0, 0], (2, 3, 1))
+    >>> r = q.copy(); r[1, 2] = [np.cos(np.pi / 12), np.sin(np.pi / 12), 0, 0]   # one joint 30°, once
+    >>> tuple(round(x, 1) for x in joint_change_deg(q, r))
+    (30.0, 21.2)
+    """
+    d = np.abs(np.sum(before * after, axis=-1)).clip(0.0, 1.0)
+    ang = np.degrees(2.0 * np.arccos(d))
+    moved = ang.max(axis=0) > 1e-3
+    return float(ang.max()), float(np.sqrt(np.mean(ang[:, moved] ** 2))) if moved.any() else 0.0
+
+
+def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y: float = 0.0) -> Motion:
+    """Whole-clip foot locking: inverse kinematics (``mink`` on a MuJoCo model of the leg chains),
+    frame by frame in time order, with
+
+    * every sole point of a foot in contact that is within ``contact.LOW_BAND_M`` of the foot's
+      lowest point pinned where it first touched (at floor height; carried by the belt on a
+      treadmill clip), a landing point settling onto the floor over :data:`LOCK_SETTLE_S`;
+    * any other sole point held above the floor;
+    * the pelvis held lightly to its source pose, every leg joint to its source angle plus the
+      correction of the frame before faded over :data:`LOCK_RELEASE_S` — out of contact the motion
+      returns to the source smoothly, in seconds whatever the frame rate;
+    * knee flexion at most :data:`KNEE_LIMIT_DEG`.
+
+    A looped clip (metadata ``looped``) is solved twice round, so its seam carries the corrections
+    of its end into its start; any other clip is solved once, with no wrap-around. ``contacts``: a
+    :class:`~stimuli.motion.contact.Contacts` (default: :func:`~stimuli.motion.contact.foot_contacts`
+    with ``points``). The metadata records ``joint_change_max_deg`` and ``joint_change_rms_deg``
+    (from the motion given) and ``pin_error_max_mm`` (the farthest a pinned point ended from its
+    pin: where a leg cannot reach).
+    """
+    import mink
+    import mujoco
+
+    from stimuli.motion.contact import LOW_BAND_M, foot_contacts
+
+    points = sole_points(motion) if points is None else points
+    contacts = foot_contacts(motion, points, floor_y=floor_y) if contacts is None else contacts
+    xml, joints = leg_model_xml(motion, points)
+    model = mujoco.MjModel.from_xml_string(xml)
+    config = mink.Configuration(model)
+    fps, n = motion.fps, motion.n_frames
+    belt = contacts.belt_speed
+    sides = [s for s in SIDES if s in points]
+    names = {s: [f"{s}{i}" for i in range(len(points[s]))] for s in sides}
+    pins = {nm: mink.FrameTask(nm, "site", position_cost=0.0, orientation_cost=0.0) for s in sides for nm in names[s]}
+    pelvis = mink.FrameTask("b0", "body", position_cost=LOCK_PELVIS_COST[0], orientation_cost=LOCK_PELVIS_COST[1])
+    roles = role_indices(motion)
+    cost = {roles[f"{s}_{r}"]: LOCK_POSTURE_COST for s in sides for r in ("hip", "knee", "ankle") if f"{s}_{r}" in roles}
+    posture = mink.PostureTask(model, cost=np.concatenate(
+        [np.zeros(6)] + [np.full(3, cost.get(j, LOCK_OTHER_POSTURE_COST)) for j in joints[1:]]))
+    tasks = [pelvis, posture, *pins.values()]
+    # qpos of every frame of the source: free root (position, w-first quaternion), then ball joints.
+    src_q = np.concatenate([motion.root_translation, motion.rotations[:, 0]]
+                           + [motion.rotations[:, j] for j in joints[1:]], axis=1)
+    cyclic = bool(motion.metadata.get("looped"))
+    order = list(range(n)) * (2 if cyclic else 1)
+    carry = np.zeros(model.nv)
+    decay = float(np.exp(-1.0 / (fps * LOCK_RELEASE_S)))
+    settle = float(np.exp(-1.0 / (fps * LOCK_SETTLE_S)))
+    anchor: dict[str, np.ndarray | None] = {nm: None for nm in pins}
+    last: dict[str, np.ndarray | None] = {nm: None for nm in pins}   # each point's solved place a frame ago
+    pin_error = 0.0
+    out_q = src_q.copy()
+    knees = {s: tuple(roles[f"{s}_{r}"] for r in ("hip", "knee", "ankle")) for s in sides}
+    for step, t in enumerate(order):
+        want = src_q[t].copy()
+        mujoco.mj_integratePos(model, want, carry * decay, 1.0)
+        config.update(want)
+        posture.set_target(want)
+        pelvis.set_target(mink.SE3.from_rotation_and_translation(mink.SO3(want[3:7]), want[:3]))
+        for s in sides:
+            world = np.array([config.get_transform_frame_to_world(nm, "site").translation() for nm in names[s]])
+            # Which points touch, and how far above the lowest, is read on the source: on the
+            # solved pose the pins would keep a rolling foot flat for ever.
+            src = contacts.points[s][t]
+            lowest = src[:, 1].min()
+            low = src[:, 1] <= lowest + LOW_BAND_M
+            for i, nm in enumerate(names[s]):
+                if contacts.down[s][t] and low[i]:
+                    if anchor[nm] is None:
+                        # Where it was a frame ago (then carried by the belt): a point that lands
+                        # stops there, and one that joins a planted foot is where that foot holds it
+                        # (the source pose would put it elsewhere, and the foot would slide to it).
+                        anchor[nm] = (world[i] if last[nm] is None else last[nm]).copy()
+                    anchor[nm][2] -= belt / fps
+                    # At the source's height above the foot's lowest point (the foot keeps the source's
+                    # tilt, heel strike to push-off; only the lowest point is on the floor), a landing
+                    # point settling there over LOCK_SETTLE_S.
+                    level = floor_y + src[i, 1] - lowest
+                    anchor[nm][1] = level + (anchor[nm][1] - level) * settle
+                    pins[nm].set_position_cost(LOCK_PIN_COST)
+                    pins[nm].set_target(mink.SE3.from_translation(anchor[nm]))
+                elif world[i, 1] < floor_y:
+                    # Lifted onto the floor where it is (a FrameTask weighs its error in the site's own
+                    # axes, so a height-only cost would weigh the wrong direction on a turned foot).
+                    anchor[nm] = None
+                    pins[nm].set_position_cost(LOCK_PIN_COST)
+                    pins[nm].set_target(mink.SE3.from_translation(np.array([world[i, 0], floor_y, world[i, 2]])))
+                else:
+                    anchor[nm] = None
+                    pins[nm].set_position_cost(0.0)
+                    pins[nm].set_target(mink.SE3.from_translation(world[i]))
+        for _ in range(LOCK_ITERATIONS):
+            vel = mink.solve_ik(config, tasks, 1.0, "daqp", damping=1e-3)
+            config.integrate_inplace(vel, 1.0)
+        for nm in pins:
+            last[nm] = config.get_transform_frame_to_world(nm, "site").translation().copy()
+            if anchor[nm] is not None and step >= len(order) - n:
+                pin_error = max(pin_error, float(np.linalg.norm(last[nm] - anchor[nm])))
+        q = config.q.copy()
+        out_q[t] = q
+        carry = np.zeros(model.nv)
+        mujoco.mj_differentiatePos(model, carry, 1.0, src_q[t], q)
+    rot = motion.rotations.copy()
+    rot[:, 0] = out_q[:, 3:7]
+    for k, j in enumerate(joints[1:]):
+        rot[:, j] = out_q[:, 7 + 4 * k: 11 + 4 * k]
+    out = motion.replace(rotations=rot, root_translation=out_q[:, :3].copy())
+    out = _limit_knees(out, knees)
+    biggest, rms = joint_change_deg(motion.rotations, out.rotations)
+    out.metadata.update(foot_locked=True, joint_change_max_deg=round(biggest, 2), joint_change_rms_deg=round(rms, 3),
+                        pin_error_max_mm=round(1000.0 * pin_error, 2))
+    return out
+
+
+def _limit_knees(motion: Motion, knees: dict) -> Motion:
+    """Knee flexion above :data:`KNEE_LIMIT_DEG` brought back to it (the hip-to-ankle line kept)."""
+    grot, gpos = motion.global_transforms()
+    rot = motion.rotations.copy()
+    changed = False
+    for s, (hip, knee, ankle) in knees.items():
+        thigh, shank = gpos[:, knee] - gpos[:, hip], gpos[:, ankle] - gpos[:, knee]
+        cosang = np.sum(thigh * shank, 1) / np.linalg.norm(thigh, axis=1) / np.linalg.norm(shank, axis=1)
+        flex = np.degrees(np.arccos(np.clip(cosang, -1.0, 1.0)))
+        bad = flex > KNEE_LIMIT_DEG
+        if not bad.any():
+            continue
+        axis = np.cross(thigh[bad], shank[bad])
+        axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+        back = quat.from_axis_angle(-axis * np.radians(flex[bad] - KNEE_LIMIT_DEG)[:, None])
+        # Turn the shank back in the world, expressed in the knee's parent frame.
+        parent = grot[bad, motion.parents[knee]]
+        rot[bad, knee] = quat.mul(quat.mul(quat.inv(parent), quat.mul(back, parent)), rot[bad, knee])
+        changed = True
+    return motion.replace(rotations=rot) if changed else motion

@@ -24,10 +24,10 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.motion import quat
-from stimuli.motion.events import contacts as detect_contacts
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
-from stimuli.motion.footfix import clean_feet, sole_positions
+from stimuli.motion.contact import contact_mask, foot_contacts
+from stimuli.motion.footfix import clean_feet, joint_change_deg, lock_feet, sole_positions
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
 
@@ -45,8 +45,6 @@ for _s, _S in (("l", "L"), ("r", "R")):
     })
 SPINE = ["spine05", "spine04", "spine03", "spine02", "spine01"]
 NECK = ["neck01", "neck02", "neck03", "head"]
-CONTACT_HEIGHT_M = 0.06
-CONTACT_SPEED_MPS = 0.45
 NEAR_GROUND_M = 0.025
 STANCE_HEIGHT_M = 0.03
 
@@ -183,12 +181,13 @@ def mesh_sole_points(body) -> dict[str, list[tuple[int, np.ndarray]]]:
     return out
 
 
-def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = False) -> Motion:
+def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = False, foot_lock: bool = False) -> Motion:
     """Retarget ``source`` onto ``body``'s Anny rig (see the module docstring).
 
     ``source`` should be a treadmill loop (``make_loop``) or a generated motion; an overground
     motion is retargeted too (its path scaled). ``keep_speed`` keeps the source's belt speed
-    instead of scaling the stride by the leg-length ratio.
+    instead of scaling the stride by the leg-length ratio. ``foot_lock`` adds the whole-clip
+    foot-locking solve after the clean-up (:func:`cleanup_feet`).
     """
     rig = body.rig
     world, roles = _world_rotations(source, rig)
@@ -208,18 +207,18 @@ def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = Fals
         root[:, [0, 2]] = p[:, [0, 2]]
     out = anny_motion(body, rot, root, source.fps, meta)
     if cleanup:
-        out = cleanup_feet(out, body)
+        out = cleanup_feet(out, body, foot_lock=foot_lock)
     return out
 
 
 def planted(motion: Motion, body) -> dict[str, np.ndarray]:
     """Feet in contact: heel strike to toe off (Zeni events), grown by up to two frames before
-    heel strike where the foot is already near the ground; detected from height and belt-relative
-    speed if no events."""
+    heel strike where the foot is already near the ground; where a foot has no events, from the
+    contact model (``contact.contact_mask``: height and belt-relative speed with hysteresis)."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
-    belt = np.array([0.0, 0.0, -float(motion.metadata.get("belt_speed_mps", 0.0))]) \
-        if motion.metadata.get("treadmill") else None
+    belt_speed = float(motion.metadata.get("belt_speed_mps", 0.0)) if motion.metadata.get("treadmill") else 0.0
+    looped = bool(motion.metadata.get("looped"))
     stance = stance_from_events(motion, gpos)
     out = {}
     for s in ("l", "r"):
@@ -232,9 +231,8 @@ def planted(motion: Motion, body) -> dict[str, np.ndarray]:
         # Exp-2 men's average walk then floated 2 cm with 62 % of frames airborne).
         flat = np.median(low[stance[s]]) if stance[s].any() else np.percentile(low, 2)
         near = low - flat < STANCE_HEIGHT_M
-        c = stance[s] & near if stance[s].any() else detect_contacts(sole, motion.fps, belt, CONTACT_HEIGHT_M,
-                                                                       CONTACT_SPEED_MPS)
-        out[s] = _dilate_near_ground(c, sole[:, :, 1].min(axis=1), bool(motion.metadata.get("looped")))
+        c = stance[s] & near if stance[s].any() else contact_mask(sole, motion.fps, belt_speed, flat, cyclic=looped)
+        out[s] = _dilate_near_ground(c, sole[:, :, 1].min(axis=1), looped)
     return out
 
 
@@ -256,8 +254,11 @@ def _dilate_near_ground(contact: np.ndarray, low: np.ndarray, cyclic: bool, heig
     return c
 
 
-def cleanup_feet(motion: Motion, body, balance_root: bool = True) -> Motion:
-    """Ground the body (lowest sole point of the planted feet at y = 0), then the contact clean-up."""
+def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: bool = False) -> Motion:
+    """Ground the body (lowest sole point of the planted feet at y = 0), then the contact clean-up;
+    with ``foot_lock`` then the whole-clip foot-locking solve (``footfix.lock_feet``, contacts from
+    ``contact.foot_contacts`` on the body's sole points). The metadata records how far the joints
+    moved from the retargeted source (``joint_change_max_deg``, ``joint_change_rms_deg``)."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
     low = np.min([sole_positions(grot, gpos, pts[s])[:, :, 1].min(axis=1) for s in ("l", "r")], axis=0)
@@ -280,5 +281,10 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True) -> Motion:
         balanced = balance(out, contact, points=pts)
         out = clean_feet(balanced, contact, belt_speed=belt, cyclic=True, points=pts, clearance_m=0.03, iterations=3,
                          reference=out)
+    if foot_lock:
+        locked = foot_contacts(out, pts, floor_y=0.0)
+        out, contact = lock_feet(out, locked, pts), locked.down
     out.metadata["contacts"] = {s: c.astype(int).tolist() for s, c in contact.items()}
+    biggest, rms = joint_change_deg(motion.rotations, out.rotations)
+    out.metadata.update(joint_change_max_deg=round(biggest, 2), joint_change_rms_deg=round(rms, 3))
     return out
