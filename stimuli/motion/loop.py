@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from stimuli.errors import StimuliError
@@ -344,9 +346,7 @@ def best_cycles(motion: Motion, positions: np.ndarray, strikes: dict, cycles: in
 
 def _shifted(segment, frames: int, fps: float):
     """A segment of a clip cut ``frames`` into the capture, in the capture's time."""
-    from dataclasses import replace
-
-    return replace(segment, start=segment.start + frames, stop=segment.stop + frames,
+    return dataclasses.replace(segment, start=segment.start + frames, stop=segment.stop + frames,
                    start_s=segment.start_s + frames / fps, end_s=segment.end_s + frames / fps,
                    hs={k: v + frames for k, v in segment.hs.items()})
 
