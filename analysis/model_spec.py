@@ -28,6 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
+from analysis.io_yaml import load_bounded, yaml_problem
 
 DEFAULT_MODELS = Path(__file__).parent / "default_models"
 
@@ -103,46 +104,20 @@ def parse_model(data: dict, source: str, design: DesignInfo) -> GenerativeModel:
     return model
 
 
-class DuplicateKey(yaml.YAMLError):
-    """A mapping of the model file names one key twice; ``line`` is 1-based."""
-
-    def __init__(self, key, line: int, first: int):
-        super().__init__(f"line {line}: key {key!r} appears twice in one mapping (first on line {first}); "
-                         f"each key may appear once")
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a mapping with the same key twice (plain YAML silently keeps the last)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = {}
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            try:
-                duplicate = key in seen
-            except TypeError:   # an unhashable key: let SafeLoader report it
-                break
-            if duplicate:
-                raise DuplicateKey(key, key_node.start_mark.line + 1, seen[key] + 1)
-            seen[key] = key_node.start_mark.line
-        return super().construct_mapping(node, deep=deep)
-
-
 def load_model(path: str | Path | None, design: DesignInfo) -> GenerativeModel:
     """Read a model file; ``None`` picks the bundled default for the design (or a null model)."""
     if path is None:
         return default_model(design)
     path = Path(path)
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
+        text = path.read_text(encoding="utf-8")
+        data, _ = load_bounded(text)   # limits on size, nodes and aliases; a key given twice is refused
     except FileNotFoundError:
         raise AnalysisError(f"{path}: model file not found") from None
     except (IsADirectoryError, UnicodeDecodeError) as exc:
         raise AnalysisError(f"{path}: not a UTF-8 YAML model file ({exc})") from None
-    except DuplicateKey as exc:
-        raise AnalysisError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
-        raise AnalysisError(f"{path}: YAML syntax error: {exc}") from None
+        raise AnalysisError(f"{path}:{yaml_problem(exc, text)}") from None
     return parse_model(data, str(path), design)
 
 

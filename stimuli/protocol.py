@@ -1,7 +1,7 @@
 """Protocol files: the researcher's description of an experiment, validated with pydantic.
 
-A protocol is YAML, read by a safe loader with limits (:data:`MAX_PROTOCOL_BYTES` of file, aliases
-expanding to at most :data:`MAX_EXPANDED_SIZE`, :data:`MAX_NESTING` levels). :func:`load_protocol`
+A protocol is YAML, read by a safe loader with limits (:data:`MAX_PROTOCOL_BYTES` of file; nodes, nesting
+and alias expansion bounded by :mod:`analysis.io_yaml`). :func:`load_protocol`
 turns it into a :class:`Protocol`, or raises :class:`~stimuli.errors.StimuliError` with one short
 paragraph naming the file, the field, the YAML line and what was expected.
 
@@ -27,6 +27,7 @@ from typing import Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
+from analysis.io_yaml import MAX_YAML_CHARACTERS, load_bounded, yaml_problem
 from stimuli.errors import StimuliError
 
 # What a factor's levels mean on screen.
@@ -916,10 +917,7 @@ def _check_screen_mapping(p: Protocol) -> None:
 
 # Limits on what the loader reads, so that no file can take minutes or gigabytes (issue 26: a 4 KB
 # 'billion laughs' file ran past 120 s at 5.7 GB). The bundled protocols are 2–4 KB, under 300 nodes.
-MAX_PROTOCOL_BYTES = 1_048_576            # 1 MiB of file
-MAX_EXPANDED_SIZE = 2 * MAX_PROTOCOL_BYTES  # characters + nodes once every alias (*name) is expanded
-MAX_NODES = 20_000                        # values, keys, lists, mappings as written (the bundled ones: 144–343)
-MAX_NESTING = 50                          # lists and mappings inside each other (a protocol needs 5)
+MAX_PROTOCOL_BYTES = MAX_YAML_CHARACTERS  # 1 MiB of file; nodes, nesting and aliases: analysis.io_yaml
 MAX_PROBLEMS = 10                         # problems one error paragraph lists; the rest are counted
 SHOWN_CHARACTERS = 60                     # a value longer than this is named by its size in messages
 
@@ -1017,138 +1015,19 @@ def check_capture_files(protocol: Protocol, path: str | Path) -> None:
                                    f"folder)")
 
 
-class YamlRefused(yaml.MarkedYAMLError):
-    """Well-formed YAML the loader will not read: over a limit, or a value PyYAML cannot build."""
-
-
-class ProtocolLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (YAML itself keeps the last
-    one, so a second ``participants:`` line would silently override the first), lists or mappings
-    nested deeper than :data:`MAX_NESTING` (PyYAML composes them recursively: 5,000 ``[`` were a
-    RecursionError) and more than :data:`MAX_NODES` nodes (pure-Python PyYAML reads ~25,000 nodes a
-    second: a 1 MiB list of one-letter items took 20 s; counting as it reads stops it early)."""
-
-    def __init__(self, stream):
-        super().__init__(stream)
-        self._depth = 0
-        self._nodes = 0
-
-    def compose_node(self, parent, index):
-        self._depth += 1
-        self._nodes += 1
-        try:
-            if self._nodes > MAX_NODES:
-                raise YamlRefused(None, None, f"more than {MAX_NODES:,} values, keys, lists and "
-                                                  "mappings; a protocol needs a few hundred",
-                                                  self.peek_event().start_mark)
-            if self._depth > MAX_NESTING:
-                raise YamlRefused(None, None, f"lists and mappings nested deeper than {MAX_NESTING} "
-                                                  "levels; a protocol needs a handful", self.peek_event().start_mark)
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-    def construct_object(self, node, deep=False):
-        try:
-            return super().construct_object(node, deep=deep)
-        except (ValueError, OverflowError) as exc:
-            # SafeConstructor's own errors: a date that does not exist (!!timestamp 2001-13-45), an
-            # integer of more digits than Python reads (4,300)
-            raise YamlRefused(None, None, f"cannot read the value ({shown(str(exc), 120)})", node.start_mark) from None
-
-    def construct_mapping(self, node, deep=False):
-        seen: dict = {}
-        for key_node, _ in node.value:
-            if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
-                key = key_node.value
-                if key in seen:
-                    raise yaml.constructor.ConstructorError(
-                        None, None, f"key {shown(key)} appears twice in one mapping (first on line {seen[key]})",
-                        key_node.start_mark)
-                seen[key] = key_node.start_mark.line + 1
-        return super().construct_mapping(node, deep=deep)
-
-
 def read_yaml(text: str, source: str = "<protocol>") -> tuple[object, yaml.Node | None]:
-    """The data of a protocol's YAML and its node tree (for line numbers), checked against the limits
-    (size, nesting, alias expansion) before anything is built from the nodes. A YAML error becomes a
-    :class:`StimuliError` naming ``source`` and the line.
+    """The data of a protocol's YAML and its node tree (for line numbers), read with the limits of
+    :mod:`analysis.io_yaml`; a YAML error becomes a :class:`StimuliError` naming ``source`` and the line.
 
     >>> read_yaml("name: x")[0]
     {'name': 'x'}
     """
     if len(text) > MAX_PROTOCOL_BYTES:
         raise StimuliError(_too_large(source, len(text), "characters"))
-    loader = None
     try:
-        loader = ProtocolLoader(text)   # reads the text's first characters: a control character fails here
-        root = loader.get_single_node()
-        if root is None:
-            return None, None
-        _check_expansion(root)
-        return loader.construct_document(root), root
+        return load_bounded(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        if isinstance(exc, yaml.reader.ReaderError):   # it has no mark, only the character's position
-            line_start = text.rfind("\n", 0, exc.position) + 1
-            where = f" line {text.count(chr(10), 0, exc.position) + 1}, column {exc.position - line_start + 1}"
-            problem = f"character #x{exc.character:04x} is not allowed in YAML ({exc.reason})"
-        if len(problem) > 300:   # PyYAML quotes what it read: an undefined alias of 1 MB, say
-            problem = f"{problem[:200]}… ({len(problem):,} characters)"
-        kind = "" if isinstance(exc, YamlRefused) else "YAML syntax error: "
-        raise StimuliError(f"{source}:{where}: {kind}{problem}") from None
-    finally:
-        if loader is not None:
-            loader.dispose()
-
-
-def _check_expansion(root: yaml.Node) -> None:
-    """Refuse a node tree whose aliases expand it past :data:`MAX_EXPANDED_SIZE` (nodes plus characters
-    of text, counted once per use) or :data:`MAX_NESTING`, or make it contain itself.
-
-    PyYAML builds an alias as a shared reference, so the expansion costs nothing until something walks
-    the values (validation, JSON, an error message): a chain of anchors each listing the one before nine
-    times makes 9⁹ strings from a few lines. Sizes are summed bottom-up, each distinct node once, without
-    recursion (a chain of 100,000 anchors must not overflow Python's stack).
-    """
-    size: dict[int, int] = {}
-    depth: dict[int, int] = {}
-    on_path: set[int] = set()
-    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
-    while stack:
-        node, children_done = stack.pop()
-        key = id(node)
-        children = _children(node)
-        if children_done:
-            on_path.discard(key)
-            size[key] = 1 + (len(node.value) if isinstance(node, yaml.ScalarNode) else 0) + sum(size[id(c)] for c in children)
-            depth[key] = 1 + max((depth[id(c)] for c in children), default=0)
-            if size[key] > MAX_EXPANDED_SIZE:
-                raise YamlRefused(
-                    None, None, f"aliases expand this value past {MAX_EXPANDED_SIZE:,} characters and nodes (a "
-                    "'billion laughs' file); write the values out, or use fewer aliases", node.start_mark)
-            if depth[key] > MAX_NESTING:
-                raise YamlRefused(
-                    None, None, f"aliases nest this value deeper than {MAX_NESTING} levels", node.start_mark)
-            continue
-        if key in size:
-            continue
-        if key in on_path:
-            raise YamlRefused(None, None, "an alias refers to itself (the value would contain "
-                                              "itself without end)", node.start_mark)
-        on_path.add(key)
-        stack.append((node, True))
-        stack.extend((child, False) for child in children if id(child) not in size)
-
-
-def _children(node: yaml.Node) -> list[yaml.Node]:
-    if isinstance(node, yaml.SequenceNode):
-        return list(node.value)
-    if isinstance(node, yaml.MappingNode):
-        return [part for pair in node.value for part in pair]
-    return []
+        raise StimuliError(f"{source}:{yaml_problem(exc, text)}") from None
 
 
 def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:

@@ -420,7 +420,7 @@ def test_model_yaml_with_a_duplicate_key_is_refused(designs, tmp_path):
     path = tmp_path / "m.yaml"
     path.write_text("name: m\neffects:\n  - term: BODY\n    values: {Hi2: -0.12, Hi2: 0.90}\n"
                     "thresholds: [-1.5, -0.5, 0.5, 1.5]\n")
-    with pytest.raises(AnalysisError, match=r"m\.yaml: line 4: key 'Hi2' appears twice"):
+    with pytest.raises(AnalysisError, match=r"m\.yaml: line 4, column \d+: key 'Hi2' appears twice"):
         load_model(path, load_design(designs["exp1_shape_motion"]))
 
 
@@ -579,7 +579,7 @@ def test_anova_csv_is_read_once_with_practice_cells_as_written_and_missing_value
 
 @pytest.mark.parametrize("module", ["analysis.practice", "analysis.io_files", "analysis.io_design", "analysis.report",
                                     "analysis.simulate", "analysis.power", "analysis.measures",
-                                    "analysis.responses.scoring", "analysis.models"])
+                                    "analysis.responses.scoring", "analysis.models", "analysis.io_yaml"])
 def test_docstring_examples_run(module):
     import doctest
     import importlib

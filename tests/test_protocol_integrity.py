@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from stimuli.errors import StimuliError
-from stimuli.protocol import MAX_EXPANDED_SIZE, MAX_PROTOCOL_BYTES, load_protocol, parse_protocol, shown
+from analysis.io_yaml import MAX_EXPANDED_SIZE
+from stimuli.protocol import MAX_PROTOCOL_BYTES, load_protocol, parse_protocol, shown
 
 PROTOCOLS = Path(__file__).resolve().parents[1] / "protocols"
 EXP1 = (PROTOCOLS / "exp1_shape_motion.yaml").read_text()
@@ -288,7 +289,7 @@ def test_empty_out_is_refused(command, run_cli, tmp_path, monkeypatch, capsys):
 def test_too_many_nodes_are_refused_early():
     """Pure-Python YAML reads ~25,000 nodes a second: a 1 MiB list of one-letter items took 20 s to be
     refused; the loader stops counting at the limit instead."""
-    from stimuli.protocol import MAX_NODES
+    from analysis.io_yaml import MAX_NODES
 
     text = replace(EXP1, "levels: [walk, jog]", "levels: [" + ", ".join(["a"] * 300_000) + "]")
     start = time.perf_counter()

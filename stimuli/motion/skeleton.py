@@ -21,7 +21,9 @@ import re
 from pathlib import Path
 
 import numpy as np
+import yaml
 
+from analysis.io_yaml import load_bounded, yaml_problem
 from stimuli.errors import StimuliError
 
 SIDES = ("l", "r")
@@ -313,10 +315,11 @@ def load_mapping(path: str | Path, joint_names: list[str]) -> dict:
         if path.suffix.lower() == ".json":
             data = json.loads(text)
         else:
-            import yaml
-            data = yaml.safe_load(text)
-    except Exception as exc:  # noqa: BLE001 - any parse error is a user error here
-        raise StimuliError(f"{path}: not valid YAML/JSON ({exc})") from None
+            data, _ = load_bounded(text)   # limits on size, nodes and aliases; a key given twice is refused
+    except json.JSONDecodeError as exc:
+        raise StimuliError(f"{path}: not valid JSON ({exc})") from None
+    except yaml.YAMLError as exc:
+        raise StimuliError(f"{path}:{yaml_problem(exc, text)}") from None
     if not isinstance(data, dict):
         raise StimuliError(f"{path}: expected a mapping {{role: joint_name}}, got {type(data).__name__}")
     for role, joint in data.items():
