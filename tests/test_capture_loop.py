@@ -1,8 +1,9 @@
 """Treadmill loops from overground captures (``../shared/data/mocap``, both folders): issue 20 item 3.
 
 Every walk, jog and run gives a loop of whole cycles from its steady straight range: the belt runs at
-the speed the pelvis covers over those frames in the raw capture (± 10 %), the seam changes pose and
-velocity no more than the capture's own largest frame-to-frame change, no frame comes from standing.
+the speed the pelvis covers over those frames in the raw capture (± 10 %), the seam changes pose no
+more than the capture's own largest frame-to-frame change and velocity no more than its 95th
+percentile, no frame comes from standing.
 The walk–stop–turn–dribble take (06_10) is refused naming its ranges; the start–walk–stop take
 (131_02) loops from its walk; a synthetic walk–turn–walk picks its longer straight part; --start/--end
 restrict the search.
@@ -85,10 +86,12 @@ def test_every_walk_and_run_loops_on_the_belt(name):
     assert loop.duration_s == pytest.approx(meta["cycles"] * np.median(strides), rel=0.10)
     # no standing frame: every source frame of the loop moves at a walking speed or more
     assert path_signals(m)["speed"][first:last + 1].min() >= MIN_SPEED_MPS
-    # seam: pose and velocity change across it no larger than the capture's own largest change
+    # seam: the pose changes across it no more than the capture's own largest frame-to-frame change
+    # over those frames (at most 1.02x their 95th percentile: CMU 07_01), the velocity no more than
+    # their 95th percentile
     own_pose, own_vel = frame_changes(body_joints(m, m.positions())[first:last + 1], periodic=False)
     pose, vel = frame_changes(body_joints(loop, loop.positions()), periodic=True)
-    assert pose[-1] <= own_pose.max() and max(vel[0], vel[-1]) <= own_vel.max()
+    assert pose[-1] <= own_pose.max() and max(vel[0], vel[-1]) <= np.percentile(own_vel, 95)
 
 
 def test_the_dribbling_turn_is_refused_naming_its_ranges():

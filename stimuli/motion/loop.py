@@ -372,8 +372,8 @@ def capture_loop(motion: Motion, gait: str | None = "walk", start_s: float | Non
 
     The longest steady, straight range of ``gait`` (walk; jog or run: a running gait; None: either)
     inside ``start_s``–``end_s`` (default: the whole capture) gives the loop: ``cycles`` whole cycles
-    (default: as many as the range holds; more than it holds repeats a divisor of them, as
-    :func:`make_loop` does) starting at the heel strike whose cycles close best, heading drift
+    (default: as many as leave half a stride of the range free for choosing the seam, at least one;
+    more than the range holds repeats a divisor of them, as :func:`make_loop` does) starting at the heel strike whose cycles close best, heading drift
     removed, forward travel subtracted (the belt speed in metadata). StimuliError naming the
     capture and every range found when no steady range of that gait holds a whole cycle.
 
@@ -382,7 +382,7 @@ def capture_loop(motion: Motion, gait: str | None = "walk", start_s: float | Non
     >>> walk = read_bvh(Path(__file__).resolve().parents[1] / "data" / "cmu_35_01_walk.bvh")
     >>> loop = capture_loop(walk, "walk")
     >>> loop.metadata["cycles"], round(loop.metadata["belt_speed_mps"], 1), loop.metadata["capture_range_s"]
-    (1, 1.3, [0.983, 2.108])
+    (2, 1.3, [0.617, 2.858])
     """
     check_gait(gait)
     where = motion.metadata.get("source", "motion")
@@ -399,11 +399,13 @@ def capture_loop(motion: Motion, gait: str | None = "walk", start_s: float | Non
                            f"It holds: {'; '.join(s.describe() for s in segments)}. Choose another gait, or a "
                            "range with --start/--end (start_s/end_s in a protocol)")
     seg = max(usable, key=lambda s: (s.duration_s, s.cycles))
-    want = seg.cycles if cycles is None else int(cycles)
+    strikes = {k: v - a for k, v in seg.hs.items()}
+    # By default as many whole cycles as leave half a stride free to choose where the seam falls.
+    free = int((seg.stop - seg.start - 1) / stride_frames(strikes) - 0.5)
+    want = max(1, min(free, seg.cycles)) if cycles is None else int(cycles)
     if want < 1:
         raise StimuliError(f"{where}: cycles must be >= 1, got {want}")
     use = want if want <= seg.cycles else max(k for k in range(1, seg.cycles + 1) if want % k == 0)
-    strikes = {k: v - a for k, v in seg.hs.items()}
     first, last, mismatch = best_cycles(part, pos, strikes, use, seg.start - a, seg.stop - a)
     clip, drift = remove_heading_drift(part.slice(first, last + 1), use)
     clip = to_treadmill(clip)

@@ -70,10 +70,10 @@ class Segment:
 
     ``kind`` is ``walk`` or ``run`` for a steady straight range (``steady`` true), else ``standing``,
     ``turning on the spot``, ``turning``, ``speeding up`` or ``slowing down``. ``steps`` counts heel
-    strikes of either foot inside the range, ``cycles`` the whole gait cycles (heel strike to heel
-    strike of one foot) it holds, ``cadence_spm`` steps per minute between the first and last heel
-    strike; ``flight`` is :func:`flight_fraction` (walk ≤ ``RUN_FLIGHT`` < run). ``start``/``stop``
-    are frames ([start, stop), ``end_s`` the last frame's time); ``hs`` the heel strikes per foot.
+    strikes of either foot inside the range, ``cadence_spm`` steps per minute between the first and
+    last heel strike; ``cycles`` the whole strides that fit in the range once one stride (heel strike to heel strike
+    of one foot) has been seen in it; ``flight`` is :func:`flight_fraction` (walk ≤ ``RUN_FLIGHT`` <
+    run). ``start``/``stop`` are frames ([start, stop), ``end_s`` the last frame's time); ``hs`` the heel strikes per foot.
     """
 
     start_s: float
@@ -244,8 +244,11 @@ def _gait_counts(motion, positions: np.ndarray, a: int, b: int) -> dict:
     ev = gait_events(motion, positions[a:b])
     strikes = np.sort(np.r_[ev["l_hs"], ev["r_hs"]])
     out["steps"] = int(len(strikes))
-    out["cycles"] = int(max(len(ev["l_hs"]) - 1, len(ev["r_hs"]) - 1, 0))
     out["hs"] = {s: np.sort(ev[f"{s}_hs"]) + a for s in ("l", "r")}
+    gaps = np.concatenate([np.diff(v) for v in out["hs"].values()])
+    # Whole cycles: how many strides fit in the range, once a stride (heel strike to heel strike of
+    # one foot) has been seen in it; Zeni misses the strikes in the range's first and last frames.
+    out["cycles"] = int((b - a - 1) // np.median(gaps)) if len(gaps) else 0
     if len(strikes) >= 2:
         out["cadence_spm"] = float(60.0 * (len(strikes) - 1) / ((strikes[-1] - strikes[0]) / motion.fps))
     return out
@@ -291,7 +294,7 @@ def steady_segments(motion, gait: str | None = None, positions: np.ndarray | Non
     >>> from stimuli.motion.bvh import read_bvh
     >>> walk = read_bvh(Path(__file__).resolve().parents[1] / "data" / "cmu_35_01_walk.bvh")
     >>> [s.describe() for s in steady_segments(walk, "walk")]
-    ['walk 0.0–3.0 s at 1.29 m/s, 4 steps (1 whole cycle)']
+    ['walk 0.0–3.0 s at 1.29 m/s, 4 steps (2 whole cycles)']
     """
     check_gait(gait)
     return [s for s in capture_segments(motion, positions) if s.matches(gait)]
