@@ -620,11 +620,16 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
 # correction fades once a foot leaves the ground, and how fast a landing foot settles onto the floor.
 LOCK_RELEASE_S = 0.12
 LOCK_SETTLE_S = 0.03
-# Task weights: contact points pinned hard, the pelvis lightly held to its source path, every joint
-# pulled towards its source angle (so that joints change no more than the pins need).
+# Task weights: contact points pinned hard, swinging sole points led along their path, the feet's
+# orientation, the pelvis and every joint held lightly (so that joints change no more than the pins
+# need).
 LOCK_PIN_COST = 100.0
 LOCK_PELVIS_COST = (5.0, 1.0)
 LOCK_POSTURE_COST = 1.0
+LOCK_SWING_COST = 10.0
+LOCK_FOOT_TURN_COST = 5.0
+# A planted foot's lowest point may stay this far above the floor where the source has it so.
+LOCK_HOVER_M = 0.003
 # Joints other than hip, knee and ankle (toes, twist bones, a pelvis-to-hip bone) change reluctantly:
 # free toes spun 58° to keep heel, ball and toe tip all on their footprints.
 LOCK_OTHER_POSTURE_COST = 10.0
@@ -667,19 +672,26 @@ def leg_model_xml(motion: Motion, points: dict) -> tuple[str, list[int]]:
     return f'<mujoco><worldbody>\n{body(0, 1)}\n</worldbody></mujoco>', joints
 
 
-def joint_change_deg(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
-    """Largest and RMS rotation (degrees) between two sets of local joint rotations (T×J×4); the RMS
-    over the frames of the joints that changed at all (a rig's untouched fingers would dilute it).
+def joint_change_deg(before: np.ndarray, after: np.ndarray, rms_joints: list[int] | None = None) -> tuple[float, float]:
+    """Largest rotation (degrees) between two sets of local joint rotations (T×J×4), over every joint,
+    and the RMS over the frames of ``rms_joints`` (default every joint; a rig's untouched fingers
+    would dilute it).
 
     >>> q = np.tile([1.0, 0, 0, 0], (2, 3, 1))
     >>> r = q.copy(); r[1, 2] = [np.cos(np.pi / 12), np.sin(np.pi / 12), 0, 0]   # one joint 30°, once
-    >>> tuple(round(x, 1) for x in joint_change_deg(q, r))
+    >>> tuple(round(x, 1) for x in joint_change_deg(q, r, rms_joints=[2]))
     (30.0, 21.2)
     """
     d = np.abs(np.sum(before * after, axis=-1)).clip(0.0, 1.0)
     ang = np.degrees(2.0 * np.arccos(d))
-    moved = ang.max(axis=0) > 1e-3
-    return float(ang.max()), float(np.sqrt(np.mean(ang[:, moved] ** 2))) if moved.any() else 0.0
+    sub = ang if rms_joints is None else ang[:, list(rms_joints)]
+    return float(ang.max()), float(np.sqrt(np.mean(sub**2)))
+
+
+def leg_joint_indices(motion: Motion) -> list[int]:
+    """Hips, knees and ankles (the joints a foot clean-up is about): the RMS joint change is over these."""
+    roles = role_indices(motion)
+    return [roles[f"{s}_{r}"] for s in SIDES for r in ("hip", "knee", "ankle") if f"{s}_{r}" in roles]
 
 
 def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y: float = 0.0) -> Motion:
@@ -687,20 +699,24 @@ def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y
     frame by frame in time order, with
 
     * every sole point of a foot in contact that is within ``contact.LOW_BAND_M`` of the foot's
-      lowest point pinned where it first touched (at floor height; carried by the belt on a
-      treadmill clip), a landing point settling onto the floor over :data:`LOCK_SETTLE_S`;
-    * any other sole point held above the floor;
-    * the pelvis held lightly to its source pose, every leg joint to its source angle plus the
-      correction of the frame before faded over :data:`LOCK_RELEASE_S` — out of contact the motion
-      returns to the source smoothly, in seconds whatever the frame rate;
+      lowest point (read on the motion given, so a rolling foot lets go heel first) pinned where it
+      was a frame before it joined (carried by the belt on a treadmill clip), at its height in the
+      motion moved as little as brings the foot's lowest point within :data:`LOCK_HOVER_M` above the
+      floor (a landing point settles there over :data:`LOCK_SETTLE_S`);
+    * every other sole point led along its own path plus its offset of the frame before, faded over
+      :data:`LOCK_RELEASE_S`, never below the floor; each foot held lightly to its own orientation;
+    * the pelvis held lightly to its pose, every leg joint to its angle, both plus the correction
+      of the frame before faded over :data:`LOCK_RELEASE_S` — out of contact the motion returns to
+      the one given smoothly, in seconds whatever the frame rate;
     * knee flexion at most :data:`KNEE_LIMIT_DEG`.
 
     A looped clip (metadata ``looped``) is solved twice round, so its seam carries the corrections
     of its end into its start; any other clip is solved once, with no wrap-around. ``contacts``: a
-    :class:`~stimuli.motion.contact.Contacts` (default: :func:`~stimuli.motion.contact.foot_contacts`
-    with ``points``). The metadata records ``joint_change_max_deg`` and ``joint_change_rms_deg``
-    (from the motion given) and ``pin_error_max_mm`` (the farthest a pinned point ended from its
-    pin: where a leg cannot reach).
+    :class:`~stimuli.motion.contact.Contacts` whose ``down`` says which frames a foot is planted
+    (default: :func:`~stimuli.motion.contact.foot_contacts` with ``points``). The metadata records,
+    from the motion given, ``joint_change_max_deg`` (any joint) and ``joint_change_rms_deg`` (hips,
+    knees, ankles: :func:`leg_joint_indices`), and ``pin_error_max_mm`` (the farthest a pinned point
+    ended from its pin: where a leg cannot reach).
     """
     import mink
     import mujoco
@@ -722,7 +738,11 @@ def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y
     cost = {roles[f"{s}_{r}"]: LOCK_POSTURE_COST for s in sides for r in ("hip", "knee", "ankle") if f"{s}_{r}" in roles}
     posture = mink.PostureTask(model, cost=np.concatenate(
         [np.zeros(6)] + [np.full(3, cost.get(j, LOCK_OTHER_POSTURE_COST)) for j in joints[1:]]))
-    tasks = [pelvis, posture, *pins.values()]
+    # Each foot keeps its source orientation in the world unless its pins need otherwise: heel, ball
+    # and toe tip lie on one line, so the pins alone left the foot free to roll and its mesh edge dug in.
+    feet = {s: mink.FrameTask(f"b{roles[f'{s}_ankle']}", "body", position_cost=0.0, orientation_cost=LOCK_FOOT_TURN_COST)
+            for s in sides}
+    tasks = [pelvis, posture, *pins.values(), *feet.values()]
     # qpos of every frame of the source: free root (position, w-first quaternion), then ball joints.
     src_q = np.concatenate([motion.root_translation, motion.rotations[:, 0]]
                            + [motion.rotations[:, j] for j in joints[1:]], axis=1)
@@ -734,6 +754,9 @@ def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y
     anchor: dict[str, np.ndarray | None] = {nm: None for nm in pins}
     last: dict[str, np.ndarray | None] = {nm: None for nm in pins}   # each point's solved place a frame ago
     pin_error = 0.0
+    prev_src: dict[str, np.ndarray] = {}
+    grot, gpos = motion.global_transforms()
+    src_pts = {s: sole_positions(grot, gpos, points[s]) for s in sides}   # the sole points as given
     out_q = src_q.copy()
     knees = {s: tuple(roles[f"{s}_{r}"] for r in ("hip", "knee", "ankle")) for s in sides}
     for step, t in enumerate(order):
@@ -746,7 +769,7 @@ def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y
             world = np.array([config.get_transform_frame_to_world(nm, "site").translation() for nm in names[s]])
             # Which points touch, and how far above the lowest, is read on the source: on the
             # solved pose the pins would keep a rolling foot flat for ever.
-            src = contacts.points[s][t]
+            src = src_pts[s][t]
             lowest = src[:, 1].min()
             low = src[:, 1] <= lowest + LOW_BAND_M
             for i, nm in enumerate(names[s]):
@@ -757,23 +780,27 @@ def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y
                         # (the source pose would put it elsewhere, and the foot would slide to it).
                         anchor[nm] = (world[i] if last[nm] is None else last[nm]).copy()
                     anchor[nm][2] -= belt / fps
-                    # At the source's height above the foot's lowest point (the foot keeps the source's
-                    # tilt, heel strike to push-off; only the lowest point is on the floor), a landing
+                    # At the source's height, moved as little as brings the foot's lowest point within
+                    # LOCK_HOVER_M above the floor (the foot keeps the source's tilt, heel strike to
+                    # push-off; pulled onto the floor exactly, a rolling mesh sole dug in), a landing
                     # point settling there over LOCK_SETTLE_S.
-                    level = floor_y + src[i, 1] - lowest
+                    level = src[i, 1] - (lowest - np.clip(lowest, floor_y, floor_y + LOCK_HOVER_M))
                     anchor[nm][1] = level + (anchor[nm][1] - level) * settle
                     pins[nm].set_position_cost(LOCK_PIN_COST)
                     pins[nm].set_target(mink.SE3.from_translation(anchor[nm]))
-                elif world[i, 1] < floor_y:
-                    # Lifted onto the floor where it is (a FrameTask weighs its error in the site's own
-                    # axes, so a height-only cost would weigh the wrong direction on a turned foot).
-                    anchor[nm] = None
-                    pins[nm].set_position_cost(LOCK_PIN_COST)
-                    pins[nm].set_target(mink.SE3.from_translation(np.array([world[i, 0], floor_y, world[i, 2]])))
                 else:
+                    # A foot off the ground follows its own path in the source, plus the offset it had
+                    # a frame ago fading with LOCK_RELEASE_S (held by the joints alone, it came down
+                    # with a pelvis lowered for the other foot and scuffed the ground), never below the
+                    # floor (a FrameTask weighs its error in the site's own axes, hence a whole target).
                     anchor[nm] = None
-                    pins[nm].set_position_cost(0.0)
-                    pins[nm].set_target(mink.SE3.from_translation(world[i]))
+                    goal = src[i] if last[nm] is None else src[i] + decay * (last[nm] - prev_src[s][i])
+                    goal[1] = max(goal[1], floor_y)
+                    pins[nm].set_position_cost(LOCK_PIN_COST if world[i, 1] < floor_y else LOCK_SWING_COST)
+                    pins[nm].set_target(mink.SE3.from_translation(goal))
+            prev_src[s] = src
+            feet[s].set_target(mink.SE3.from_rotation_and_translation(
+                mink.SO3(grot[t, roles[f"{s}_ankle"]]), gpos[t, roles[f"{s}_ankle"]]))
         for _ in range(LOCK_ITERATIONS):
             vel = mink.solve_ik(config, tasks, 1.0, "daqp", damping=1e-3)
             config.integrate_inplace(vel, 1.0)
@@ -791,7 +818,7 @@ def lock_feet(motion: Motion, contacts=None, points: dict | None = None, floor_y
         rot[:, j] = out_q[:, 7 + 4 * k: 11 + 4 * k]
     out = motion.replace(rotations=rot, root_translation=out_q[:, :3].copy())
     out = _limit_knees(out, knees)
-    biggest, rms = joint_change_deg(motion.rotations, out.rotations)
+    biggest, rms = joint_change_deg(motion.rotations, out.rotations, leg_joint_indices(motion))
     out.metadata.update(foot_locked=True, joint_change_max_deg=round(biggest, 2), joint_change_rms_deg=round(rms, 3),
                         pin_error_max_mm=round(1000.0 * pin_error, 2))
     return out

@@ -27,7 +27,7 @@ from stimuli.motion import quat
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
 from stimuli.motion.contact import contact_mask, foot_contacts
-from stimuli.motion.footfix import clean_feet, joint_change_deg, lock_feet, sole_positions
+from stimuli.motion.footfix import clean_feet, joint_change_deg, leg_joint_indices, lock_feet, sole_positions
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
 
@@ -258,7 +258,8 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: boo
     """Ground the body (lowest sole point of the planted feet at y = 0), then the contact clean-up;
     with ``foot_lock`` then the whole-clip foot-locking solve (``footfix.lock_feet``, contacts from
     ``contact.foot_contacts`` on the body's sole points). The metadata records how far the joints
-    moved from the retargeted source (``joint_change_max_deg``, ``joint_change_rms_deg``)."""
+    moved from the retargeted source: ``joint_change_max_deg`` (any joint) and
+    ``joint_change_rms_deg`` (hips, knees and ankles)."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
     low = np.min([sole_positions(grot, gpos, pts[s])[:, :, 1].min(axis=1) for s in ("l", "r")], axis=0)
@@ -285,6 +286,6 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: boo
         locked = foot_contacts(out, pts, floor_y=0.0)
         out, contact = lock_feet(out, locked, pts), locked.down
     out.metadata["contacts"] = {s: c.astype(int).tolist() for s, c in contact.items()}
-    biggest, rms = joint_change_deg(motion.rotations, out.rotations)
+    biggest, rms = joint_change_deg(motion.rotations, out.rotations, leg_joint_indices(motion))
     out.metadata.update(joint_change_max_deg=round(biggest, 2), joint_change_rms_deg=round(rms, 3))
     return out
