@@ -55,6 +55,15 @@ for _s in ("l", "r"):
     TREE += [(f"{_s}_clavicle", "chest"), (f"{_s}_shoulder", f"{_s}_clavicle"), (f"{_s}_elbow", f"{_s}_shoulder"),
              (f"{_s}_wrist", f"{_s}_elbow"), (f"{_s}_hand_end", f"{_s}_wrist")]
 
+# Highest point of a swinging wrist, below the shoulder, as a fraction of the arm's length (upper arm
+# plus forearm), per gait. A jog's forward swing (a larger arm-swing ratio with body fat, the thesis's
+# trend, times the actor's style) on 55° elbows otherwise brought the wrist to 2–5 cm below the
+# shoulder on Exp 1's heavier bodies and 8–11 cm on the lean ones: the hands "waving" at shoulder
+# height grew with body size. Runners' hands peak about chest height. The bound is on the generator's
+# own skeleton (level trunk); on Exp 1's Anny bodies it gives 10.2–12.5 cm below the shoulder
+# (tests/test_hands_arms.py), the trunk's lean and Anny's forearm raising the wrist a little.
+WRIST_TOP_BELOW_SHOULDER = {"jog": 0.32}
+
 # Cadence (steps/min) and speed (m/s) of a gait when neither a protocol nor an option gives them
 # (the bundled protocols' values).
 DEFAULT_PACE = {"walk": (112.0, 1.2), "jog": (138.0, 2.2)}
@@ -205,6 +214,8 @@ def _pose(p: GaitParams, names: list[str], phi: np.ndarray, hip_scale: float, ad
             np.mean(curve("ShoulderAngles", "X")(np.linspace(0, 1, 100)))
         abd = _about_mean(curve("ShoulderAngles", "Y"), pa, p.arm_bob_ratio) + p.arm_abduction_deg
         elbow = curve("ElbowAngles", "X")(pa) + p.elbow_flexion_deg
+        if p.gait in WRIST_TOP_BELOW_SHOULDER:
+            flex = cap_arm_flexion(flex, elbow, WRIST_TOP_BELOW_SHOULDER[p.gait])
         rot[:, names.index(f"{s}_shoulder")] = quat.mul(_rx(-d(flex)), _rz(sign * d(abd)))
         rot[:, names.index(f"{s}_elbow")] = _rx(-d(elbow))
     # Pelvis (left-side curves; left forward = negative yaw about +y).
@@ -225,6 +236,48 @@ def _pose(p: GaitParams, names: list[str], phi: np.ndarray, hip_scale: float, ad
     rot[:, names.index("spine")] = half
     rot[:, names.index("chest")] = half
     return rot
+
+
+def _arm_lengths() -> tuple[float, float]:
+    """Upper arm and forearm length of the generator's skeleton as fractions of stature."""
+    pts = skeleton_points(1.0)
+    return (float(np.linalg.norm(pts["l_elbow"] - pts["l_shoulder"])),
+            float(np.linalg.norm(pts["l_wrist"] - pts["l_elbow"])))
+
+
+def wrist_height(flex_deg, elbow_deg) -> np.ndarray:
+    """Wrist height relative to the shoulder (fraction of the arm's length) of an arm in the sagittal
+    plane: shoulder flexion ``flex_deg`` from hanging, elbow flexion ``elbow_deg``.
+
+    >>> round(float(wrist_height(0.0, 0.0)), 3), round(float(wrist_height(0.0, 90.0)), 3)  # hanging; forearm level
+    (-1.0, -0.564)
+    """
+    upper, fore = _arm_lengths()
+    f, e = np.radians(flex_deg), np.radians(elbow_deg)
+    return -(upper * np.cos(f) + fore * np.cos(f + e)) / (upper + fore)
+
+
+def cap_arm_flexion(flex_deg, elbow_deg, below: float) -> np.ndarray:
+    """Shoulder flexion (degrees) lowered, where needed, so the wrist stays ``below`` (fraction of the
+    arm's length) under the shoulder; other frames are unchanged.
+
+    >>> out = cap_arm_flexion(np.array([0.0, 70.0]), np.array([60.0, 60.0]), 0.22)
+    >>> float(out[0]), bool(abs(wrist_height(out[1], 60.0) + 0.22) < 1e-6)
+    (0.0, True)
+    """
+    flex = np.array(flex_deg, float)
+    elbow = np.broadcast_to(np.asarray(elbow_deg, float), flex.shape)
+    over = wrist_height(flex, elbow) > -below
+    if not over.any():
+        return flex
+    # Bisection between a flexion that keeps the wrist low (the arm hanging back) and the curve's own.
+    lo, hi = np.full(over.sum(), -45.0), flex[over]
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        high = wrist_height(mid, elbow[over]) > -below
+        hi, lo = np.where(high, mid, hi), np.where(high, lo, mid)
+    flex[over] = lo
+    return flex
 
 
 def _stabilise_head(names, parents, offsets, rot, root, amount: float) -> np.ndarray:

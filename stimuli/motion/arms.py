@@ -1,0 +1,285 @@
+"""Hands and arms on an Anny body: a relaxed hand pose and upper arms kept clear of the torso.
+
+Every motion source leaves Anny's finger bones at their rest orientation (generated gaits, BVH
+captures without fingers, averages), and the rest hand is flat with spread fingers: an open palm
+in every clip. :func:`relax_hands` curls the fingers into a relaxed cascade (more flexion towards
+the little finger, as in a resting hand) and draws them together, once, for any pose whose
+fingers carry nothing.
+
+A motion's arm directions come from a skeleton that knows the body's height but not its girth,
+so on a heavy torso the upper arm sinks into the flank. :func:`clear_arms` measures, frame by
+frame, how deep the upper arm's skin lies inside the torso's (:func:`arm_penetration`) and
+abducts the upper arm about the chest's forward axis just enough to clear it, plus a margin:
+the added abduction grows with the body's girth at the arm because it is measured on that body.
+
+Both are applied where the renderer receives a figure's pose
+(``stimuli.render.clip.render_frames``), so every path — generated, retargeted, averaged,
+physics — gets them once.
+
+Examples
+--------
+>>> from stimuli.bodies.api import fit_body                                    # doctest: +SKIP
+>>> body = fit_body("M", 1.83, 35.8)                                           # doctest: +SKIP
+>>> rot = relax_hands(body.rig, body.rest_pose()[0])                            # doctest: +SKIP
+>>> finger_curl_deg(body.rig, rot)[0] > finger_curl_deg(body.rig, body.rest_pose()[0])[0] + 30  # doctest: +SKIP
+True
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.spatial import cKDTree
+
+from stimuli.motion import quat
+
+# Relaxed-hand flexion (degrees) of the proximal, middle and distal phalanx of fingers 2–5 (index to
+# little): a resting hand's cascade, about 20–35° at the knuckle, 30–45° at the middle joint, more
+# towards the little finger (resting hand posture, e.g. Jaworski & Kozakiewicz 2016, and the usual
+# "position of rest" of hand surgery texts).
+FINGER_CURL_DEG = {2: (20.0, 30.0, 12.0), 3: (24.0, 35.0, 14.0), 4: (28.0, 40.0, 16.0), 5: (32.0, 45.0, 18.0)}
+THUMB_CURL_DEG = (8.0, 12.0, 10.0)
+# Fraction of each proximal phalanx's rest splay from the middle finger that the relaxed hand removes.
+FINGER_CLOSE = 0.6
+# Upper-arm skin kept at least this far outside the torso's (m).
+ARM_CLEARANCE_M = 0.005
+# Torso skin that can hold an arm: below the upper-arm joint by this much (higher up the shoulder's
+# own skin joins the arm's).
+ARMPIT_DROP_M = 0.06
+# Where the upper arm's skin meets the armpit's the measure reads up to 0.3 cm on every body, lean
+# ones included (skin folding at the seam, not an arm in the flank): shallower is left alone.
+SEAM_DEPTH_M = 0.003
+# An arm vertex counts as inside the torso when its nearest torso vertex is within this distance and
+# it lies along that vertex's normal (lateral offset below the mesh's spacing): far from the flank the
+# nearest-vertex sign means nothing.
+NEAR_M = 0.06
+LATERAL_M = 0.02
+
+
+def _heads(rig, rotations) -> np.ndarray:
+    return rig.forward_kinematics(rotations, np.zeros((len(rotations), 3)))[1]
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _angle_deg(a, b) -> np.ndarray:
+    return np.degrees(np.arccos(np.clip(np.einsum("...i,...i->...", _unit(a), _unit(b)), -1.0, 1.0)))
+
+
+def _palm_normal(rig, side: str) -> np.ndarray:
+    """Unit normal of the rest palm pointing out of the palm (the side the fingers curl to).
+
+    The plane holds the fingers' direction and the knuckle line; of its two normals the palm's is
+    the one the thumb's tip lies on (the thumb sits in front of the palm)."""
+    h = rig.rest_heads
+    wrist = h[rig.index(f"wrist.{side}")]
+    index, little = h[rig.index(f"finger2-1.{side}")], h[rig.index(f"finger5-1.{side}")]
+    along = 0.5 * (index + little) - wrist
+    n = _unit(np.cross(along, index - little))
+    thumb = h[rig.index(f"finger1-3.{side}")]
+    return n if (thumb - wrist) @ n > 0 else -n
+
+
+def _finger_chain(rig, side: str, finger: int) -> list[int]:
+    return [rig.index(f"finger{finger}-{k}.{side}") for k in (1, 2, 3)]
+
+
+def _bone_direction(rig, bone: int) -> np.ndarray:
+    """Rest direction of a finger bone: to its child's head, or along its parent for the last one."""
+    h = rig.rest_heads
+    children = np.flatnonzero(rig.parents == bone)
+    if len(children):
+        return _unit(h[children[0]] - h[bone])
+    return _unit(h[bone] - h[rig.parents[bone]])
+
+
+@functools.lru_cache(maxsize=64)
+def _relaxed_hand_cached(key) -> dict[int, np.ndarray]:
+    return _relaxed_hand(_RIGS[key])
+
+
+_RIGS: dict = {}
+
+
+def relaxed_hand(rig) -> dict[int, np.ndarray]:
+    """Local rotations (w-first quaternions, rest-world axes) of the finger bones of a relaxed hand."""
+    key = (tuple(rig.names), np.asarray(rig.rest_heads).round(6).tobytes())
+    _RIGS[key] = rig
+    return _relaxed_hand_cached(key)
+
+
+def _relaxed_hand(rig) -> dict[int, np.ndarray]:
+    out = {}
+    for side in ("L", "R"):
+        n = _palm_normal(rig, side)
+        middle = _bone_direction(rig, rig.index(f"finger3-1.{side}"))
+        for finger in (1, 2, 3, 4, 5):
+            chain = _finger_chain(rig, side, finger)
+            curls = THUMB_CURL_DEG if finger == 1 else FINGER_CURL_DEG[finger]
+            for k, (bone, curl) in enumerate(zip(chain, curls)):
+                d = _bone_direction(rig, bone)
+                q = quat.from_axis_angle(_unit(np.cross(d, n)) * np.radians(curl))
+                if k == 0 and finger in (2, 4, 5):
+                    # Close the splay: turn the proximal phalanx about the palm normal towards the middle finger.
+                    flat = _unit(d - (d @ n) * n)
+                    mid = _unit(middle - (middle @ n) * n)
+                    splay = np.arctan2(np.cross(flat, mid) @ n, flat @ mid)
+                    q = quat.mul(q, quat.from_axis_angle(n * FINGER_CLOSE * splay))
+                out[bone] = q
+    return out
+
+
+def finger_bones(rig) -> list[int]:
+    """Indices of the finger bones (fingers 1–5, three phalanges each, both hands)."""
+    return [i for s in ("L", "R") for f in range(1, 6) for i in _finger_chain(rig, s, f)]
+
+
+def carries_fingers(rig, rotations) -> bool:
+    """Whether any finger bone of any frame is off its rest orientation (by more than 0.5°)."""
+    q = np.asarray(rotations, float)[:, finger_bones(rig)]
+    return bool((np.abs(q[..., 0]) < np.cos(np.radians(0.25))).any())
+
+
+def relax_hands(rig, rotations) -> np.ndarray:
+    """``rotations`` (T, J, 4) with the relaxed hand pose on fingers that carry none (else unchanged)."""
+    rot = np.array(rotations, float)
+    if carries_fingers(rig, rot):
+        return rot
+    for bone, q in relaxed_hand(rig).items():
+        rot[:, bone] = q
+    return rot
+
+
+def finger_curl_deg(rig, rotations) -> np.ndarray:
+    """Per frame, the mean over fingers 2–5 and both hands of the angle between the metacarpal
+    (wrist to knuckle) and the middle phalanx: knuckle plus middle-joint flexion (≈0 for a flat hand)."""
+    heads = _heads(rig, rotations)
+    out = []
+    for s in ("L", "R"):
+        w = heads[:, rig.index(f"wrist.{s}")]
+        for f in (2, 3, 4, 5):
+            a, b, c = (heads[:, i] for i in _finger_chain(rig, s, f))
+            out.append(_angle_deg(a - w, c - b))
+    return np.mean(out, axis=0)
+
+
+def finger_spread_deg(rig, rotations) -> np.ndarray:
+    """Per frame, the mean over both hands of the angle between the index and little fingers'
+    proximal phalanges (how far the fingers fan out)."""
+    heads = _heads(rig, rotations)
+    out = []
+    for s in ("L", "R"):
+        i1, i2, _ = _finger_chain(rig, s, 2)
+        l1, l2, _ = _finger_chain(rig, s, 5)
+        out.append(_angle_deg(heads[:, i2] - heads[:, i1], heads[:, l2] - heads[:, l1]))
+    return np.mean(out, axis=0)
+
+
+@functools.lru_cache(maxsize=1)
+def _segment_vertex_sets() -> dict[str, np.ndarray]:
+    """Vertices of the torso (spine and pelvis segments) and of each upper arm (Anny topology)."""
+    from stimuli.bodies.body import mesh_parts
+    from stimuli.bodies.segments import segment_labels
+
+    parts, labels = mesh_parts(), segment_labels()
+
+    def of(names):
+        return np.unique(parts["faces"][np.isin(parts["face_seg"], [labels.index(n) for n in names])])
+
+    torso = of(["spine", "pelvis"])
+    return {"torso": torso, "L": np.setdiff1d(of(["upper_arm.L"]), torso), "R": np.setdiff1d(of(["upper_arm.R"]), torso)}
+
+
+def _arm_sets(body) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    sets = _segment_vertex_sets()
+    armpit = body.rig.rest_heads[body.rig.index("upperarm01.L"), 1] - ARMPIT_DROP_M
+    torso = sets["torso"][body.vertices[sets["torso"], 1] < armpit]
+    return torso, {"L": sets["L"], "R": sets["R"]}
+
+
+def arm_penetration(body, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How deep (m, ≥ 0) each upper arm's skin lies inside the torso's, per frame and side (T, 2: L, R),
+    and the deepest vertex's index (T, 2; −1 where none is inside).
+
+    Signed distance of each upper-arm vertex along the outward normal of its nearest torso vertex
+    (flank below the armpit), counted where that vertex is near and the arm vertex lies along its normal.
+    """
+    from stimuli.render.dynamic import vertex_normals
+
+    verts = np.asarray(vertices, float).reshape(-1, body.n_vertices, 3)
+    torso, arms = _arm_sets(body)
+    operator = _normal_operator(body)
+    depth = np.zeros((len(verts), 2))
+    worst = np.full((len(verts), 2), -1)
+    for t, v in enumerate(verts):
+        normals = vertex_normals(v, body.faces, operator)[torso]
+        tree = cKDTree(v[torso])
+        for k, side in enumerate(("L", "R")):
+            p = v[arms[side]]
+            dist, near = tree.query(p)
+            off = p - v[torso][near]
+            signed = np.einsum("ij,ij->i", off, normals[near])
+            lateral = np.linalg.norm(off - signed[:, None] * normals[near], axis=1)
+            inside = (dist < NEAR_M) & (lateral < LATERAL_M) & (signed < 0)
+            if inside.any():
+                j = int(np.argmin(np.where(inside, signed, np.inf)))
+                depth[t, k], worst[t, k] = -signed[j], arms[side][j]
+    return depth, worst
+
+
+def _normal_operator(body):
+    from stimuli.render.dynamic import vertex_normal_operator
+
+    cached = getattr(body, "_arm_normal_operator", None)
+    if cached is None:
+        cached = vertex_normal_operator(np.asarray(body.faces), body.n_vertices)
+        try:
+            object.__setattr__(body, "_arm_normal_operator", cached)
+        except (AttributeError, TypeError):
+            pass
+    return cached
+
+
+def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEARANCE_M, passes: int = 3) -> np.ndarray:
+    """``rotations`` (T, J, 4) with each upper arm abducted, frame by frame, just enough to keep its skin
+    ``clearance_m`` outside the torso's (:func:`arm_penetration`).
+
+    The abduction turns the upper arm about the chest's forward axis; its angle is the depth over the
+    deepest vertex's distance from the shoulder joint, spread over neighbouring frames (a running
+    maximum, then smoothed) so the arm does not twitch. Frames already clear are left as they are.
+    """
+    rig = body.rig
+    rot = np.array(rotations, float)
+    root = np.asarray(root_translation, float)
+    chest = rig.index("spine01")
+    for _ in range(passes):
+        verts = body.skin(rot, root)
+        depth, worst = arm_penetration(body, verts)
+        if depth.max(initial=0.0) <= SEAM_DEPTH_M:
+            break
+        grot, heads = rig.forward_kinematics(rot, root)
+        for k, (side, sign) in enumerate((("L", 1.0), ("R", -1.0))):
+            arm = rig.index(f"upperarm01.{side}")
+            need = np.zeros(len(rot))
+            hit = (worst[:, k] >= 0) & (depth[:, k] > SEAM_DEPTH_M)
+            if not hit.any():
+                continue
+            reach = np.linalg.norm(verts[hit, worst[hit, k]] - heads[hit, arm], axis=1)
+            need[hit] = (depth[hit, k] + clearance_m) / np.maximum(reach, 0.05)
+            need = gaussian_filter1d(maximum_filter1d(need, 5, mode="nearest"), 1.0, mode="nearest")
+            # World axis: the chest's forward; abduction turns a hanging left arm towards +x.
+            forward = np.einsum("tij,j->ti", grot[:, chest], np.array([0.0, 0.0, 1.0]))
+            parent = rig.parents[arm]
+            axis_parent = np.einsum("tji,tj->ti", grot[:, parent], forward)  # into the parent's axes
+            turn = quat.from_axis_angle(_unit(axis_parent) * (sign * need)[:, None])
+            rot[:, arm] = quat.mul(turn, rot[:, arm])
+    return rot
+
+
+def natural_pose(body, rotations, root_translation) -> np.ndarray:
+    """The pose the renderer draws: relaxed hands (where the motion has none), arms clear of the torso."""
+    return clear_arms(body, relax_hands(body.rig, rotations), root_translation)
