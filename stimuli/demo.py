@@ -15,8 +15,10 @@ from stimuli.design import build_design, write_design
 from stimuli.protocol import load_protocol
 
 PROTOCOL_DIR = Path(__file__).resolve().parents[1] / "protocols"
-BUNDLED = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation"]
-RENDERED = ["exp1_shape_motion", "exp2_com_vs_average"]
+BUNDLED = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "thesis_mesh", "thesis_validation",
+           "exp1_own_captures"]
+# exp1_own_captures: Exp 1's design on real CMU captures (protocols/captures), 16 clips.
+RENDERED = ["exp1_shape_motion", "exp2_com_vs_average", "exp1_own_captures"]
 DEMO_RESOLUTION, DEMO_FPS = (480, 270), 30   # keeps the two paper sets to a few minutes on 2 cores
 
 

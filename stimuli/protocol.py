@@ -79,8 +79,37 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+# What an actor's capture may be (``motions:`` per gait): read by ``stimuli.motion.captures``.
+CAPTURE_SUFFIXES = (".bvh", ".npz")
+CAPTURE_GAITS = ("walk", "jog", "run")   # stimuli.motion.steady.GAITS: what capture_loop finds
+
+
+class Capture(Strict):
+    """One gait of an actor as captured: a BVH or AMASS ``.npz`` file (relative paths start from the
+    protocol's folder) and, optionally, the time range (seconds) to take the loop from; written as
+    the file name alone or as ``{file: F, start_s: S, end_s: E}``."""
+
+    file: str = Field(min_length=1)
+    start_s: float | None = Field(default=None, ge=0.0)
+    end_s: float | None = Field(default=None, gt=0.0)
+
+    @field_validator("file")
+    @classmethod
+    def _format(cls, value: str) -> str:
+        if Path(value).suffix.lower() not in CAPTURE_SUFFIXES:
+            raise ValueError(f"{shown(value)} is not a motion capture: expected a .bvh file or an AMASS .npz")
+        return value
+
+    @model_validator(mode="after")
+    def _range(self) -> "Capture":
+        if self.start_s is not None and self.end_s is not None and self.end_s <= self.start_s:
+            raise ValueError(f"end_s: {self.end_s:g} s must come after start_s ({self.start_s:g} s)")
+        return self
+
+
 class Actor(Strict):
-    """A person whose body (and motion) the stimuli show. Units: metres, kg/m²."""
+    """A person whose body (and motion) the stimuli show. Units: metres, kg/m². ``motions``: the
+    actor's own captures per gait (``{walk: captures/a_walk.bvh}``); a gait without one is generated."""
 
     id: str
     label: str
@@ -93,6 +122,15 @@ class Actor(Strict):
     chest_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["chest_m"][0], le=GIRTH_RANGES_M["chest_m"][1])
     body_fat_pct: float | None = Field(default=None, ge=BODY_FAT_RANGE_PCT[0], le=BODY_FAT_RANGE_PCT[1])
     practice_only: bool = Field(default=False, strict=True)
+    motions: dict[str, Capture] = {}
+
+    @field_validator("motions", mode="before")
+    @classmethod
+    def _captures(cls, value):
+        """A capture may be written as its file name alone."""
+        if isinstance(value, dict):
+            return {gait: {"file": spec} if isinstance(spec, str) else spec for gait, spec in value.items()}
+        return value
 
     @field_validator("id", "label")
     @classmethod
@@ -580,6 +618,7 @@ def check_consistency(p: Protocol) -> None:
         raise ValueError("response.type: 'ranking' needs a factor with role 'alternatives' (what is ranked)")
     _check_design_size(p)
     _check_actor_labels(p)
+    _check_actor_motions(p)
     _check_arrangement_ids(p)
     for name in p.blocks.by:
         if name not in names:
@@ -644,6 +683,21 @@ def check_trial_count(p: Protocol, participants: int, field: str) -> None:
         raise ValueError(f"{field}: {participants:,} participants × {_count_text(per_participant)} test trials each "
                          f"make {_count_text(per_participant * participants)} rows of trials.csv; a protocol may "
                          f"make at most {MAX_TRIALS:,}")
+
+
+def _check_actor_motions(p: Protocol) -> None:
+    """An actor's captures are for the protocol's gaits (the gait's cadence and speed are needed
+    for the generated actors it is shown beside)."""
+    for a in p.actors:
+        unknown = sorted(set(a.motions) - set(p.gaits))
+        if unknown:
+            raise ValueError(f"actors.{a.id}.motions.{unknown[0]}: actor {a.id} names a capture for gait "
+                             f"{shown(unknown[0])}, which is not declared under gaits (declared: "
+                             f"{', '.join(p.gaits) or 'none'})")
+        other = sorted(set(a.motions) - set(CAPTURE_GAITS))
+        if other:
+            raise ValueError(f"actors.{a.id}.motions.{other[0]}: actor {a.id}: a capture's gait must be one of "
+                             f"{', '.join(CAPTURE_GAITS)} (the gaits a loop is found for), got {shown(other[0])}")
 
 
 def _count_text(count: int) -> str:
@@ -992,6 +1046,19 @@ def capture_file(protocol: Protocol, spec: str) -> Path:
     return path if path.is_absolute() else protocol.folder / path
 
 
+def actor_capture_file(protocol: Protocol, capture: Capture) -> Path:
+    """The file of an actor's capture (``motions.<gait>.file``); a relative path starts from the
+    protocol's folder."""
+    path = Path(capture.file).expanduser()
+    return path if path.is_absolute() else protocol.folder / path
+
+
+def capture_line(protocol_path: str | Path, actor_id: str, gait: str) -> int | None:
+    """The YAML line of ``actors.<actor_id>.motions.<gait>`` in a protocol file (for messages)."""
+    text = read_protocol_text(Path(protocol_path))
+    return _line_of(read_yaml(text, str(protocol_path))[1], ["actors", actor_id, "motions", gait])
+
+
 def check_capture_files(protocol: Protocol, path: str | Path) -> None:
     """``motion: "bvh:<path>"`` settings must name files that exist (relative to the protocol's folder).
 
@@ -1056,6 +1123,8 @@ def describe_validation_error(exc: ValidationError, source: str, root) -> str:
         field = ".".join(_key_text(x) for x in loc) if loc else "(top level)"
         line = _line_of(root, loc)
         where = f" (line {line})" if line else ""
+        if len(loc) > 3 and loc[0] == "actors" and loc[2] == "motions":   # a capture: whose, of which gait
+            where = f" ({'line ' + str(line) + '; ' if line else ''}actor {_actor_id(root, loc[1])}, gait {loc[3]})"
         if err["type"] == "extra_forbidden":
             known = ", ".join(_known_fields(loc[:-1]))
             message = f"unknown field (check the spelling; the known fields here: {known})"
@@ -1070,6 +1139,17 @@ def describe_validation_error(exc: ValidationError, source: str, root) -> str:
     if len(errors) > MAX_PROBLEMS:
         parts.append(f"and {len(errors) - MAX_PROBLEMS:,} more problems")
     return f"{source}: invalid protocol: " + "; ".join(parts)
+
+
+def _actor_id(root, index) -> str:
+    """The ``id`` of the actor at ``index`` in the YAML (for messages about its fields), else its index."""
+    actors = next((v for k, v in getattr(root, "value", []) if getattr(k, "value", None) == "actors"), None)
+    if isinstance(actors, yaml.SequenceNode) and isinstance(index, int) and index < len(actors.value):
+        item = actors.value[index]
+        if isinstance(item, yaml.MappingNode):
+            return next((str(v.value) for k, v in item.value if getattr(k, "value", None) == "id"
+                         and isinstance(v, yaml.ScalarNode)), str(index))
+    return str(index)
 
 
 def _key_text(key) -> str:

@@ -62,7 +62,10 @@ def test_manifest_has_design_columns_and_verifiable_hashes(short_protocol, tmp_p
         assert frames.shape == (11, 90, 160, 3) and int(row["n_frames"]) == 11 and meta["fps"] == 10
         assert (out / row["poster"]).exists()
         assert row["cadence_spm"] == ""  # procedural stepping poses do not follow the gait's cadence
-    assert header[-1] == "cadence_spm"  # added after the columns older manifests have
+    # added after the columns older manifests have: cadence, then the motion's source (empty for stepping poses)
+    assert header[-6:] == ["cadence_spm", "motion_source", "motion_file", "motion_sha256", "motion_range_s",
+                           "motion_params"]
+    assert all(row["motion_source"] == "" for row in rows)
     assert verify_manifest(out) == []
     assert run_cli("render", "--out", out, "--verify")[0] == 0
     assert (out / "contact_sheet.png").exists()

@@ -161,12 +161,13 @@ def _cycle_contacts(motion: Motion, n: int) -> np.ndarray | None:
 
 
 def protocol_average(protocol, sex: str, gait: str, fps: float | None = None, cycles: int | None = None) -> Motion:
-    """The NoCOM motion of Exp 2: the DTW average of the test actors' own gaits of one sex.
+    """The NoCOM motion of Exp 2: the DTW average of the test actors' own gaits of one sex (their
+    captures where they name them, ``actors[].motions``; else generated).
 
     The metadata records the average body (mean height and BMI of those actors), which the physics
     step uses as the reference body.
     """
-    from stimuli.motion.style import actor_gait
+    from stimuli.motion.captures import average_inputs
 
     actors = [a for a in protocol.actors if a.sex == sex and not a.practice_only]
     if len(actors) < 2:
@@ -174,10 +175,10 @@ def protocol_average(protocol, sex: str, gait: str, fps: float | None = None, cy
                            f"found {len(actors)}")
     if gait not in protocol.gaits:
         raise StimuliError(f"protocol {protocol.name}: gaits.{gait} is not declared (cadence and speed are needed)")
-    spec = protocol.gaits[gait]
     fps = float(fps or protocol.clip.fps)
     cycles = int(cycles or protocol.clip.cycles)
-    motions = [actor_gait(a, gait, spec.cadence_spm, spec.speed_mps, protocol.seed, fps, cycles) for a in actors]
+    # Actors' own captures where the protocol names them (stimuli.motion.captures), else generated gaits.
+    motions = average_inputs(protocol, actors, gait, fps, cycles)
     average = average_motion(motions, cycles=cycles, fps=fps)
     average.metadata.update(actors=[a.id for a in actors], sex=sex,
                             height_m=float(np.mean([a.height_m for a in actors])),

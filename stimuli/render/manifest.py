@@ -2,9 +2,15 @@
 
 Columns: ``stimulus_id, file, sha256, width, height, fps, n_frames, duration_s, layout,
 <factor columns>, left, right`` (two alternatives) or ``positions`` (k > 2), ``practice``, then
-``kind, poster, inputs_hash, cadence_spm``. ``file`` and ``poster`` are relative to the manifest's
-folder; ``cadence_spm`` is the steps per minute the clip shows (``stimuli.render.timing``), empty
-for motions read from captures, procedural poses and rows written before the column existed.
+``kind, poster, inputs_hash, cadence_spm``, then the motion's source (``stimuli.motion.captures.
+MOTION_COLUMNS``): ``motion_source`` (``capture`` or ``generator``), ``motion_file``,
+``motion_sha256``, ``motion_range_s`` (the capture's seconds the loop took), ``motion_params`` (the
+generator's parameters) — for clips showing one actor's gait; empty otherwise (Exp 2's averages,
+the thesis sets, procedural poses, rows written before the columns existed). ``file`` and
+``poster`` are relative to the manifest's folder; ``cadence_spm`` is the steps per minute the clip
+shows (``stimuli.render.timing``; for an actor's capture, its own cadence as the looped clip plays
+it), empty for the thesis validation's ``bvh:`` captures, procedural poses and rows written before
+the column existed.
 """
 
 from __future__ import annotations
@@ -38,13 +44,33 @@ def manifest_row(protocol, stimulus, look, info, out_dir: Path, poster: Path, di
             "poster": poster.relative_to(out_dir).as_posix(), "inputs_hash": digest}
     # A procedural stepping pose does not follow the gait's cadence.
     row["cadence_spm"] = clip_cadence(protocol, stimulus, look.duration_s, look.fps) if poses == "protocol" else ""
-    return row
+    motion = motion_columns(protocol, stimulus, poses)
+    if motion["motion_source"] == "capture":   # a capture keeps its own cadence, not the gait's
+        from stimuli.motion.captures import looped_capture, shown_cadence
+        from stimuli.render.sources import gait_of
+
+        loop = looped_capture(protocol, stimulus.motion_actor or stimulus.body_actor, gait_of(protocol, stimulus))
+        row["cadence_spm"] = round(shown_cadence(loop, look.duration_s, look.loop), 2)
+    return row | motion
+
+
+def motion_columns(protocol, stimulus, poses: str = "protocol") -> dict[str, str]:
+    """Where the clip's motion came from (``stimuli.motion.captures.motion_record``): filled for a
+    clip showing one actor's gait (no alternatives factor) rendered from the protocol's sources."""
+    from stimuli.motion.captures import MOTION_COLUMNS, motion_record
+    from stimuli.render.sources import gait_of
+
+    if poses != "protocol" or protocol.factors_with_role("alternatives"):
+        return dict.fromkeys(MOTION_COLUMNS, "")
+    return motion_record(protocol, stimulus.motion_actor or stimulus.body_actor, gait_of(protocol, stimulus))
 
 
 def with_all_columns(row: dict[str, str]) -> dict[str, str]:
     """A row kept from an earlier manifest, with the columns added since (empty), so that every row of
     the rewritten manifest has the same columns."""
-    return row if "cadence_spm" in row else row | {"cadence_spm": ""}
+    from stimuli.motion.captures import MOTION_COLUMNS
+
+    return row | {column: "" for column in ("cadence_spm", *MOTION_COLUMNS) if column not in row}
 
 
 def read_manifest(out_dir: str | Path) -> dict[str, dict[str, str]]:

@@ -125,7 +125,9 @@ def _alternative_figure(protocol, stimulus, look, kind: str, level: str, label: 
 def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
     """An actor's walk or jog on ``body``'s rig: (rotations, root, belt speed) for the clip's frames.
 
-    The motion generator makes the actor's own gait (``params_for_actor``: protocol cadence and
+    An actor that names a capture of the gait (``motions:``) shows that capture, looped from its
+    steady straight range (its own cadence and speed: the belt runs at the capture's speed scaled
+    to the body's legs). Otherwise the motion generator makes the actor's own gait (``params_for_actor``: protocol cadence and
     speed, the actor's anthropometric trends and individual style, seeded by the protocol), with
     the whole number of gait cycles closest to the clip's duration; it is then retargeted onto
     the shown body (Exp 1: swap shape, keep motion) and resampled to the clip's frames.
@@ -134,9 +136,14 @@ def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
     if gait not in protocol.gaits:
         raise StimuliError(f"{protocol.name}: gaits.{gait} is not declared (cadence and speed are needed)")
     spec = protocol.gaits[gait]
-    cycles = cycles_for_clip(look.duration_s, spec.cadence_spm)
-    motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
-                        float(look.fps), cycles)
+    if gait in actor.motions:   # the actor's own capture of this gait, looped (stimuli.motion.captures)
+        from stimuli.motion.captures import looped_capture
+
+        motion = looped_capture(protocol, actor_id, gait)
+    else:
+        cycles = cycles_for_clip(look.duration_s, spec.cadence_spm)
+        motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
+                            float(look.fps), cycles)
     on_body = on_rig(motion, body)
     rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps,
                                  look.loop)
@@ -174,8 +181,8 @@ def _method_file(protocol, method: str, stimulus, gait: str, sex: str) -> str:
 
 
 def motion_files(protocol, stimulus, motions_dir=None) -> list:
-    """The motion files a stimulus reads (part of its inputs hash): Exp 2's NoCOM/COM files, the
-    thesis validation's ``bvh:`` captures."""
+    """The motion files a stimulus reads (part of its inputs hash): an actor's own capture, Exp 2's
+    NoCOM/COM files, the thesis validation's ``bvh:`` captures."""
     from pathlib import Path
 
     alternatives = protocol.factors_with_role("alternatives")
@@ -183,6 +190,10 @@ def motion_files(protocol, stimulus, motions_dir=None) -> list:
         from stimuli.render.thesis_sources import source_files
 
         return source_files(protocol, stimulus)
+    if not alternatives:   # an actor's own capture (Exp 1 on captures): a changed file renders again
+        from stimuli.motion.captures import capture_files
+
+        return capture_files(protocol, stimulus.motion_actor or stimulus.body_actor, gait_of(protocol, stimulus))
     if motions_dir is None or not alternatives or alternatives[0].maps_to != "method":
         return []
     sex = next((a.sex for a in protocol.actors if a.id == stimulus.body_actor), "")
