@@ -63,3 +63,42 @@ def orbit_view(target, azimuth_deg: float, elevation_deg: float, distance_m: flo
     direction = np.array([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)])
     eye = np.asarray(target, float) + distance_m * direction
     return View(look_at(eye, target), np.radians(fov_deg), width, height)
+
+
+
+# Framing of the layouts on a floor (treadmill, side_by_side): the camera keeps the protocol's
+# azimuth, elevation and field of view, and comes as near as it can while the treadmill (its near
+# end included) and the body span at most this share of the frame, centred. The protocol's
+# distance_m left Exp 1's treadmill cut by the bottom edge and Exp 2's bodies at ~45 % of the height.
+FRAME_SPAN = 0.92
+# Side by side on a floor the slots' centres are this share of the width the view would give them
+# (0.8: 40 % of the frame apart, not 50 %): at 20° azimuth each treadmill reaches further left of
+# its slot than right, and with the wider spacing the outer ends limited a 1.60-m body to 54 % of
+# the height, with a fifth of the frame empty between the treadmills.
+SLOT_SPREAD = 0.8
+
+
+def framed_view(points, target, azimuth_deg: float, elevation_deg: float, fov_deg: float, width: int,
+                height: int, span: float = FRAME_SPAN, rounds: int = 8) -> tuple[View, float]:
+    """The view (and its distance) at which ``points`` fill ``span`` of the frame's height or
+    width, whichever is reached first, with as much room above them as below and on the wider
+    side as across the centre line. ``points`` are world points (P, 3) around ``target``, or a
+    function of (view, distance) giving them (side-by-side slots move apart with the distance).
+
+    >>> import numpy as np
+    >>> pts = np.array([[-0.5, -0.2, 1.0], [0.5, -0.2, -1.0], [0.0, 1.8, 0.0]])
+    >>> view, distance = framed_view(pts, [0, 0.9, 0], 35, 10, 40, 640, 360)
+    >>> rows = view.project(pts)[:, 1]
+    >>> round(float(rows.max() - rows.min()) / 360, 3), bool(abs(rows.min() - (360 - rows.max())) < 0.5)
+    (0.92, True)
+    """
+    target = np.array(target, float)
+    distance = 4.0
+    for _ in range(rounds):   # the picture shrinks as 1/distance: each round rescales and re-aims
+        view = orbit_view(target, azimuth_deg, elevation_deg, distance, fov_deg, width, height)
+        xy = view.project(np.asarray(points(view, distance) if callable(points) else points, float))
+        fill = max(np.ptp(xy[:, 1]) / height, 2 * np.abs(xy[:, 0] - width / 2).max() / width)
+        focal = 0.5 * height / np.tan(0.5 * view.yfov)
+        target[1] -= ((xy[:, 1].min() + xy[:, 1].max()) / 2 - height / 2) * distance / focal
+        distance *= fill / span
+    return orbit_view(target, azimuth_deg, elevation_deg, distance, fov_deg, width, height), float(distance)

@@ -80,12 +80,30 @@ def placements(look: Look, n: int, body_height_m: float = 1.75):
     Slots lie on the camera's horizontal axis. Each slot is turned about the vertical by the angle
     between the camera's line of sight to the centre and to that slot, so that under perspective
     every figure is seen from exactly the protocol's azimuth (a fair side-by-side comparison).
+    On a floor (``treadmill``, ``side_by_side``) the camera is framed by ``camera.framed_view``: as
+    near as every slot's whole treadmill and the body's head allow, centred; ``distance_m`` is not used.
     """
     target = np.array([0.0, 0.5 * body_height_m, 0.0])   # framed on the body's middle
-    view = orbit_view(target, look.azimuth_deg, look.elevation_deg, look.distance_m, look.fov_deg,
-                      look.width, look.height)
-    half_h = look.distance_m * np.tan(np.radians(look.fov_deg) / 2)
-    view_width = 2 * half_h * look.width / look.height
+    if look.floor and look.layout in ("treadmill", "side_by_side"):
+        from stimuli.render.camera import framed_view
+        from stimuli.render.treadmill import outline
+
+        box = np.vstack([outline(), [[0.0, body_height_m + 0.04, 0.0]]])
+        view, distance = framed_view(lambda v, d: np.vstack([apply_pose(p, box) for p in _slot_poses(look, n, v, d)]),
+                                     target, look.azimuth_deg, look.elevation_deg, look.fov_deg, look.width, look.height)
+    else:
+        distance = look.distance_m
+        view = orbit_view(target, look.azimuth_deg, look.elevation_deg, distance, look.fov_deg,
+                          look.width, look.height)
+    return _slot_poses(look, n, view, distance), view
+
+
+def _slot_poses(look: Look, n: int, view, distance: float) -> list[np.ndarray]:
+    """The slots' poses for a camera ``distance`` from the target (see :func:`placements`)."""
+    from stimuli.render.camera import SLOT_SPREAD
+
+    half_h = distance * np.tan(np.radians(look.fov_deg) / 2)
+    view_width = 2 * half_h * look.width / look.height * (SLOT_SPREAD if look.floor else 1.0)
     eye = view.pose[:3, 3] * np.array([1.0, 0.0, 1.0])
     poses = []
     for s in (slot_offsets(n, view_width) if n > 1 else [0.0]):
@@ -97,7 +115,7 @@ def placements(look: Look, n: int, body_height_m: float = 1.75):
         pose[:3, :3] = [[c, 0.0, si], [0.0, 1.0, 0.0], [-si, 0.0, c]]
         pose[:3, 3] = slot
         poses.append(pose)
-    return poses, view
+    return poses
 
 
 def centred_root(figure: Figure) -> np.ndarray:

@@ -17,7 +17,7 @@ from stimuli.render.gl import ordered_scene, pyrender_module, renderer
 BODY_GREY = (0.62, 0.62, 0.62)
 FLOOR_LIGHT, FLOOR_DARK = (236, 236, 236), (200, 200, 200)
 CHECKER_M = 0.5            # side of one floor square in metres
-FLOOR_HALF_M = 25.0        # the floor reaches this far from the target in x and z
+FLOOR_HALF_M = 150.0       # the floor fades into the background out to this far from the target
 
 
 def hex_colour(text: str, where: str = "clip.background") -> tuple[float, float, float]:
@@ -32,22 +32,26 @@ def hex_colour(text: str, where: str = "clip.background") -> tuple[float, float,
     return tuple(int(value[i:i + 2], 16) / 255.0 for i in (0, 2, 4))
 
 
-def grey_material(rgb=BODY_GREY, roughness: float = 0.75):
+def grey_material(rgb=BODY_GREY, roughness: float = 0.75, contact_shadow: float = 0.0):
+    """A matte grey for shaders/mesh.frag; ``contact_shadow`` (0–1, carried in the metallic factor,
+    which the matte shader does not use otherwise) darkens the surface by up to that fraction under
+    a figure standing at the mesh's origin."""
     pyrender = pyrender_module()
-    return pyrender.MetallicRoughnessMaterial(baseColorFactor=(*rgb, 1.0), metallicFactor=0.0,
+    return pyrender.MetallicRoughnessMaterial(baseColorFactor=(*rgb, 1.0), metallicFactor=float(contact_shadow),
                                               roughnessFactor=roughness)
 
 
 def checker_floor_mesh(centre, y: float, square: float = CHECKER_M, half: float = FLOOR_HALF_M,
-                       fade=(6.0, 16.0)):
-    """Checkerboard squares as coloured geometry (no texture), fading to a flat grey with distance.
+                       fade=(6.0, 16.0), background=(1.0, 1.0, 1.0)):
+    """Checkerboard squares as coloured geometry (no texture), fading to a flat grey with distance,
+    and the grey fading into ``background`` out to ``half`` metres (:func:`far_floor`).
 
     Far squares shrink below a pixel near the horizon; fading their contrast between ``fade[0]``
     and ``fade[1]`` metres from the centre keeps the horizon free of moiré.
     """
     pyrender = pyrender_module()
     cx, cz = float(centre[0]), float(centre[2])
-    n = int(np.ceil(half / square))
+    n = int(np.ceil(fade[1] / square)) + 1   # squares beyond the fade would be the flat grey anyway
     i, k = np.meshgrid(np.arange(-n, n), np.arange(-n, n), indexing="ij")
     near = np.hypot((i.ravel() + 0.5) * square, (k.ravel() + 0.5) * square) < fade[1] + square
     i, k = i.ravel()[near], k.ravel()[near]   # beyond the fade every square is the flat grey below
@@ -67,17 +71,50 @@ def checker_floor_mesh(centre, y: float, square: float = CHECKER_M, half: float 
     colours[:, :3] = np.repeat(colour, 4, axis=0)
     base = np.arange(len(x0))[:, None] * 4
     faces = np.concatenate([base + [0, 2, 1], base + [0, 3, 2]])
-    # The far floor: one flat grey quad a few millimetres lower, out to the floor's edge.
-    far_v, far_f = quad(cx - half, cx + half, cz - half, cz + half, y - 0.005)
+    # The far floor, a few millimetres lower: flat grey that fades into the background towards its
+    # edge, so the camera sees no edge (a square floor's far edge showed as a tilted horizon).
+    far_v, far_f, far_c = far_floor(centre, y - 0.005, mid, background, (fade[1], half))
     faces = np.concatenate([faces, far_f + len(vertices)]).astype(np.uint32)
     vertices = np.concatenate([vertices, far_v.astype(np.float32)])
-    colours = np.concatenate([colours, np.tile([*mid, 1.0], (4, 1)).astype(np.float32)])
+    colours = np.concatenate([colours, far_c.astype(np.float32)])
     # emissive_factor > 0 marks an unlit surface for shaders/mesh.frag: the colours are final.
     unlit = pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 1.0, 1.0, 1.0), metallicFactor=0.0,
                                                roughnessFactor=1.0, emissiveFactor=(1.0, 1.0, 1.0))
     prim = pyrender.Primitive(positions=vertices, normals=_flat_up_normals(vertices), color_0=colours,
                               indices=faces, material=unlit, mode=pyrender.GLTF.TRIANGLES)
     return pyrender.Mesh([prim])
+
+
+def far_floor(centre, y: float, grey, background, radii=(16.0, 150.0), rings: int = 16, sectors: int = 96):
+    """A disc of the floor's flat ``grey`` that turns into ``background`` between ``radii`` metres
+    from ``centre``: (vertices (V, 3), faces (F, 3), RGBA colours (V, 4)). Its rim has the
+    background's colour, so no edge shows however the camera looks (the horizon melts away). The
+    colour changes linearly in 1/distance, as the rows of the picture do, so that each row differs
+    from the next by under a grey level (a fade linear in distance crowded into a few rows near the
+    horizon). The outer radius stays within the camera's far plane (``Stage``: 200 m).
+
+    >>> v, f, c = far_floor([0, 0, 0], 0.0, (0.8, 0.8, 0.8), (1.0, 1.0, 1.0), rings=4, sectors=8)
+    >>> v.shape, f.shape, c[0].tolist(), c[-1].tolist()
+    ((41, 3), (72, 3), [0.800000011920929, 0.800000011920929, 0.800000011920929, 1.0], [1.0, 1.0, 1.0, 1.0])
+    """
+    inner, outer = radii
+    radius = 1.0 / np.linspace(1.0 / inner, 1.0 / outer, rings + 1)
+    angle = np.linspace(0.0, 2.0 * np.pi, sectors, endpoint=False)
+    ring_xz = radius[:, None, None] * np.stack([np.cos(angle), np.sin(angle)], -1)[None]    # (R, S, 2)
+    vertices = np.zeros((1 + ring_xz.shape[0] * sectors, 3))
+    vertices[:, 1] = y
+    vertices[1:, 0] = float(centre[0]) + ring_xz[..., 0].ravel()
+    vertices[1:, 2] = float(centre[2]) + ring_xz[..., 1].ravel()
+    share = np.concatenate([[0.0], np.repeat(np.linspace(0.0, 1.0, rings + 1), sectors)])[:, None]
+    colours = np.ones((len(vertices), 4), np.float32)
+    colours[:, :3] = (1 - share) * np.asarray(grey, float) + share * np.asarray(background, float)
+    k = np.arange(sectors)
+    nxt = (k + 1) % sectors
+    faces = [np.stack([np.zeros(sectors, int), 1 + nxt, 1 + k], 1)]          # the inner disc, a fan
+    for r in range(rings):
+        a, b = 1 + r * sectors, 1 + (r + 1) * sectors
+        faces += [np.stack([a + k, a + nxt, b + k], 1), np.stack([a + nxt, b + nxt, b + k], 1)]
+    return vertices, np.concatenate(faces), colours
 
 
 def quad(x0, x1, z0, z1, y):
@@ -107,6 +144,7 @@ class Stage:
     def __init__(self, view: View, background=(1.0, 1.0, 1.0), lit: bool = True):
         pyrender = pyrender_module()
         self.view = view
+        self.background = background
         self.scene = ordered_scene(bg_color=(*background, 1.0), ambient_light=(0.28, 0.28, 0.28) if lit else (0, 0, 0))
         # An intrinsics camera can render any sub-rectangle of the image (see ``render``).
         self.focal = 0.5 * view.height / np.tan(0.5 * view.yfov)
@@ -137,7 +175,7 @@ class Stage:
 
     def add_checker_floor(self, centre, y: float):
         """The checkerboard ground plane, squares of ``CHECKER_M``, aligned to world x/z; returns its node."""
-        return self.add(checker_floor_mesh(centre, y))
+        return self.add(checker_floor_mesh(centre, y, background=self.background))
 
     def render(self, region: tuple[int, int, int, int] | None = None, rgba: bool = False) -> np.ndarray:
         """The frame, or only the pixels ``region = (x0, y0, x1, y1)`` of it, as uint8 RGB(A).

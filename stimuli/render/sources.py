@@ -23,6 +23,7 @@ import numpy as np
 from stimuli.errors import StimuliError
 from stimuli.motion.loop import cycles_for_clip
 from stimuli.render.clip import Figure, Look
+from stimuli.render.timing import belt_matched_speed
 
 
 class MissingSource(StimuliError):
@@ -143,6 +144,10 @@ def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
     else:
         cycles = cycles_for_clip(look.duration_s, spec.cadence_spm)
         motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
+                            float(look.fps), cycles)
+        # Same belt speed for every body: the protocol's, whatever the legs and the loop's fit (timing.py)
+        matched = belt_matched_speed(spec.speed_mps, motion, body, look.n_frames / look.fps, look.loop)
+        motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, matched, protocol.seed,
                             float(look.fps), cycles)
     on_body = on_rig(motion, body)
     rot, root, scale = fit_loop(on_body.rotations, on_body.root_translation, on_body.fps, look.n_frames, look.fps,

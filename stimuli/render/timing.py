@@ -3,17 +3,19 @@
 A looping clip shows a whole number of gait cycles (two steps each): the motion is made with the
 whole number of cycles closest to ``duration_s × cadence_spm / 120`` and ``sources.fit_loop``
 stretches it over the clip's frames. The clip therefore shows ``cycles × 120 / clip seconds``
-steps per minute, and the treadmill belt runs faster or slower by the same ratio. When that
-differs from the protocol's cadence by more than :data:`TOLERANCE`, ``validate`` and ``render``
-say so (:func:`cadence_warnings`), naming clip durations that would keep the cadence. A clip with
-``clip.loop: false`` keeps the protocol's cadence and speed and ends mid-cycle (a replay restarts it).
+steps per minute. The belt keeps the protocol's speed on every body (the gait is generated at
+the speed that gives it after retargeting and the loop's fit: :func:`belt_matched_speed`), so the
+steps get shorter or longer by that ratio instead. When the cadence differs from the protocol's by
+more than :data:`TOLERANCE`, ``validate`` and ``render`` say so (:func:`cadence_warnings`), naming
+clip durations that would keep it. A clip with ``clip.loop: false`` keeps the protocol's cadence
+and speed and ends mid-cycle (a replay restarts it).
 
 Only the gaits the protocol declares under ``gaits`` are fitted here: motions read from captures
 (the thesis protocols) keep their own cadence and are retimed to whole loops by ``fit_loop``.
 
 >>> fit = gait_fit("jog", 150, 2.4, duration_s=2, fps=15)
->>> fit.cycles, round(fit.effective_cadence_spm, 1), round(fit.effective_speed_mps, 2)
-(2, 120.0, 1.92)
+>>> fit.cycles, round(fit.effective_cadence_spm, 1), fit.effective_speed_mps, round(fit.step_length_m, 2)
+(2, 120.0, 2.4, 1.2)
 """
 
 from __future__ import annotations
@@ -71,13 +73,23 @@ class GaitFit:
 
     @property
     def ratio(self) -> float:
-        """Effective / protocol cadence; the belt speed scales by the same ratio."""
+        """Effective / protocol cadence: how much faster ``fit_loop`` plays the generated loop."""
         return self.effective_cadence_spm / self.cadence_spm
 
     @property
     def effective_speed_mps(self) -> float:
-        """Belt speed: scaled with the cadence in a loop; the protocol's in a clip that does not loop."""
-        return self.speed_mps * self.ratio if self.loop else self.speed_mps
+        """Belt speed: the protocol's, on every body and whatever the cadence (:func:`belt_matched_speed`)."""
+        return self.speed_mps
+
+    @property
+    def step_length_m(self) -> float:
+        """The step length the clip shows: belt speed over the shown cadence (steps per second)."""
+        return self.effective_speed_mps * 60.0 / self.effective_cadence_spm
+
+    @property
+    def protocol_step_length_m(self) -> float:
+        """The step length the protocol's cadence and speed make."""
+        return self.speed_mps * 60.0 / self.cadence_spm
 
     @property
     def within_tolerance(self) -> bool:
@@ -90,6 +102,26 @@ def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float,
     the protocol's ``clip.loop``; a clip that does not loop keeps the cadence and is cut at its end)."""
     return GaitFit(gait, float(cadence_spm), float(speed_mps), clip_seconds(duration_s, fps),
                    whole_cycles(duration_s, cadence_spm), bool(loop), float(fps))
+
+
+def belt_matched_speed(speed_mps: float, probe, body, clip_s: float, loop: bool = True) -> float:
+    """The speed to generate a gait at so that, on ``body`` and in the clip, the belt runs at ``speed_mps``.
+
+    ``probe`` is the generator's motion at ``speed_mps`` (its skeleton and loop length do not
+    depend on the speed). Two things change the belt speed after generation: retargeting scales
+    the stride by the legs' ratio ``k`` (``stimuli.motion.retarget``), and ``fit_loop`` plays the
+    loop ``s`` times faster to fill the clip with whole cycles (112 steps/min shown at 120 in a
+    4-s clip). Generating at ``speed_mps / (k·s)`` makes the shown belt speed exactly the
+    protocol's for every body; the cadence stays the clip's, so the step length is
+    ``speed / cadence`` (0.60 m for a 1.2 m/s walk at 120 steps/min) for everyone.
+    """
+    from stimuli.motion.retarget import rig_leg_length
+    from stimuli.motion.skeleton import leg_length
+
+    legs = rig_leg_length(body.rig) / leg_length(probe)
+    loops = max(1, int(round(clip_s / (probe.n_frames / probe.fps))))
+    faster = loops * probe.n_frames / probe.fps / clip_s if loop else 1.0
+    return float(speed_mps) / (legs * faster)
 
 
 # The motion generator needs this many frames for the gait cycles of a clip (stimuli.motion.generate).
@@ -172,8 +204,8 @@ def cadence_warnings(protocol, fps: int | None = None) -> list[str]:
         warnings.append(
             f"gaits.{fit.gait}: {fit.cadence_spm:g} steps/min does not fill the {fit.clip_s:g} s clip with whole "
             f"gait cycles, so the clip shows {fit.cycles} cycle(s) at {fit.effective_cadence_spm:.1f} steps/min "
-            f"({(fit.ratio - 1) * 100:+.1f} %) and the belt runs at about {fit.effective_speed_mps:.2f} m/s instead of "
-            f"{fit.speed_mps:g}" + (f"; clip.duration_s {keep} keeps {fit.cadence_spm:g} steps/min "
+            f"({(fit.ratio - 1) * 100:+.1f} %); the belt keeps {fit.effective_speed_mps:g} m/s, so steps are "
+            f"{fit.step_length_m:.2f} m instead of {fit.protocol_step_length_m:.2f}" + (f"; clip.duration_s {keep} keeps {fit.cadence_spm:g} steps/min "
                                     f"(within {TOLERANCE:.0%})" if keep else ""))
     if warnings and len(fits) > 1:
         both = _seconds(keeping_durations([f.cadence_spm for f in fits], duration, rate), rate)

@@ -25,6 +25,7 @@ HOOD_LENGTH_M = 0.18
 STRIPE_M = 0.25            # wanted belt pattern period; adjusted per clip for a seamless loop
 STRIPE_FRACTION = 0.22     # the lighter band's share of one period
 BELT_GREY, STRIPE_GREY = (0.20, 0.20, 0.21), (0.36, 0.36, 0.37)
+CONTACT_SHADOW = 0.55      # the belt is this much darker under the figure's centre (soft blob, shaders/mesh.frag)
 
 
 @dataclass(frozen=True)
@@ -72,8 +73,9 @@ class Treadmill:
         self._corners, belt_faces = quad(ox - half_w, ox + half_w, oz - size.length / 2, oz + size.length / 2, BELT_Y)
         self.n_stripes = int(np.ceil(size.length / period_m)) + 1
         stripes_v, stripes_f = self._stripes(0.0)
-        self.stripes = DynamicMesh(stripes_v, stripes_f, grey_material(STRIPE_GREY, roughness=0.95))
-        stage.add(static_mesh(self._corners, belt_faces, grey_material(BELT_GREY, roughness=0.95)), pose=self.pose)
+        self.stripes = DynamicMesh(stripes_v, stripes_f, grey_material(STRIPE_GREY, roughness=0.95, contact_shadow=CONTACT_SHADOW))
+        stage.add(static_mesh(self._corners, belt_faces, grey_material(BELT_GREY, roughness=0.95, contact_shadow=CONTACT_SHADOW)),
+                  pose=self.pose)
         stage.add(self.stripes.mesh, pose=self.pose)
         stage.add(static_mesh(*self._frame_geometry(), grey_material((0.30, 0.31, 0.33), roughness=0.6)), pose=self.pose)
 
@@ -115,3 +117,14 @@ class Treadmill:
         ]
         merged = trimesh.util.concatenate(parts)
         return merged.vertices, merged.faces
+
+
+def outline(size: TreadmillSize = TreadmillSize()) -> np.ndarray:
+    """The corners (8, 3) of the box holding a treadmill at the origin (deck, rails and hood), for framing.
+
+    >>> outline().shape
+    (8, 3)
+    """
+    half_w = size.width / 2 + RAIL_WIDTH_M
+    back, front = -size.length / 2 - 0.05, size.length / 2 + HOOD_LENGTH_M
+    return np.array([[x, y, z] for x in (-half_w, half_w) for y in (-DECK_HEIGHT_M - 0.01, 0.06) for z in (back, front)])

@@ -25,6 +25,8 @@ uniform vec3 cam_pos;
 uniform vec3 ambient_light;
 
 in vec3 frag_position;
+flat in mat3 frag_turn;
+in vec3 frag_local;
 #ifdef NORMAL_LOC
 in vec3 frag_normal;
 #endif
@@ -66,13 +68,24 @@ void main()
     float shine = 1.0 - material.roughness_factor;
     // A compile-time bound lets the shader compiler unroll the loop (much faster on llvmpipe);
     // the scene always has exactly MAX_DIRECTIONAL_LIGHTS directional lights.
+    // The lights are set for a figure facing the protocol's azimuth and turn with each mesh's
+    // rotation (a side-by-side slot is turned ~20 deg to face the camera): both figures are lit
+    // alike, not one more from the front than the other. Unturned meshes see the lights as set.
     for (int i = 0; i < MAX_DIRECTIONAL_LIGHTS; i++) {
-        vec3 l = -directional_lights[i].direction;
+        vec3 l = normalize(frag_turn * -directional_lights[i].direction);
         float wrapped = max((dot(n, l) + 0.25) * 0.8, 0.0);  // soft terminator: "soft" lights
         light += directional_lights[i].color * directional_lights[i].intensity * wrapped;
         float s = max(dot(n, normalize(l + v)), 0.0);
         s *= s; s *= s; s *= s; s *= s; s *= s;            // s^32 without pow()
         highlight += directional_lights[i].intensity * shine * 0.25 * s;
     }
-    frag_color = vec4(clamp(base.rgb * light + vec3(highlight), 0.0, 1.0), base.a);
+    vec3 colour = clamp(base.rgb * light + vec3(highlight), 0.0, 1.0);
+    // Contact shadow: metallic_factor (unused by this matte shader) is how much a surface darkens
+    // under the figure standing at its origin -- a soft elliptical blob, 0.32 m across and 0.50 m
+    // along the belt (1/e radii), so the feet do not look pasted on (stimuli.render.treadmill).
+    if (material.metallic_factor > 0.0) {
+        vec2 q = frag_local.xz / vec2(0.32, 0.50);
+        colour *= 1.0 - material.metallic_factor * exp(-dot(q, q));
+    }
+    frag_color = vec4(colour, base.a);
 }

@@ -17,6 +17,8 @@ uniform mat4 V;
 uniform mat4 P;
 
 out vec3 frag_position;
+flat out mat3 frag_turn;   // the mesh's rotation: lights turn with the figure (mesh.frag)
+out vec3 frag_local;       // the mesh's own coordinates: where the contact shadow falls (mesh.frag)
 #ifdef NORMAL_LOC
 out vec3 frag_normal;
 #endif
@@ -32,6 +34,8 @@ void main()
     mat4 model = M * inst_m;
     gl_Position = P * V * model * vec4(position, 1.0);
     frag_position = vec3(model * vec4(position, 1.0));
+    frag_turn = mat3(model);
+    frag_local = position;
 #ifdef NORMAL_LOC
     frag_normal = mat3(model) * normal;
 #endif
