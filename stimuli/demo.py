@@ -20,6 +20,9 @@ BUNDLED = ["exp1_shape_motion", "exp2_com_vs_average", "thesis_pointlight", "the
 # exp1_own_captures: Exp 1's design on real CMU captures (protocols/captures), 16 clips.
 RENDERED = ["exp1_shape_motion", "exp2_com_vs_average", "exp1_own_captures"]
 DEMO_RESOLUTION, DEMO_FPS = (480, 270), 30   # keeps the two paper sets to a few minutes on 2 cores
+# The captures' set at the quick size: its 16 clips took 76 s at 480×270/30 fps and 48 s at 320×180/15 fps
+# (both with the 2 cores shared, load 5; 25 s at 320×180/15 fps on a quieter machine).
+DEMO_SIZES = {"exp1_own_captures": ((320, 180), 15)}
 
 
 def bundled_protocol(name: str) -> Path:
@@ -71,8 +74,9 @@ def run_demo(out: Path, quick: bool = False) -> dict[str, list[Path]]:
         for name in RENDERED:
             # quick renders only a few clips, so they go beside the design: the survey needs a full manifest
             target = out / "quick_clips" / name if quick else out / name
-            report = render_protocol(bundled_protocol(name), target, resolution=None if quick else DEMO_RESOLUTION,
-                                     fps=None if quick else DEMO_FPS, quick=quick, limit=4 if quick else None,
+            resolution, fps = DEMO_SIZES.get(name, (DEMO_RESOLUTION, DEMO_FPS))
+            report = render_protocol(bundled_protocol(name), target, resolution=None if quick else resolution,
+                                     fps=None if quick else fps, quick=quick, limit=4 if quick else None,
                                      motions_dir=physics_dir if name == "exp2_com_vs_average" else None,
                                      progress=not quick)
             made[f"render/{name}"] = [report.manifest, report.contact_sheet]

@@ -223,3 +223,28 @@ def test_render_quick_records_captures_in_the_manifest(tmp_path):
     # a capture keeps its own cadence: the run's 162 steps/min, not the protocol's jog (136.4)
     assert float(rows["M-jog-Lo-Lo"]["cadence_spm"]) == pytest.approx(163.6, abs=0.5)
     assert float(rows["F-jog-Hi-Hi"]["cadence_spm"]) == pytest.approx(136.4, abs=0.1)
+
+
+@pytest.mark.slow  # fits the mean body and retargets four walks (about 10 s)
+def test_exp2s_average_is_made_of_the_captures_where_actors_name_them(tmp_path):
+    """Two of Exp 2's four M actors name captures: all four walks go onto the mean body's rig (captures
+    come on other skeletons) and are averaged there; the average records the actors' mean body."""
+    from stimuli.motion.average import protocol_average
+
+    shutil.copytree(CAPTURES, tmp_path / "captures")
+    text = (ROOT / "protocols" / "exp2_com_vs_average.yaml").read_text()
+    for actor, capture in (("M_Lo1", "cmu_35_01_walk.bvh"), ("M_Lo2", "cmu_02_01_walk_mb2names_120fps.bvh")):
+        line = next(line for line in text.splitlines() if f"{{id: {actor}," in line)
+        text = text.replace(line, line.replace("}", f", motions: {{walk: captures/{capture}}}}}"))
+    (tmp_path / "exp2.yaml").write_text(text)
+    p = load_protocol(tmp_path / "exp2.yaml")
+    average = protocol_average(p, "M", "walk", fps=30, cycles=4)
+    assert average.joint_names[0] == "root" and average.fps == 30.0   # the Anny rig, not a capture's
+    distances = average.metadata["dtw_distances"]
+    assert len(distances) == 4 and distances[2][3] > 0   # the two captures differ from each other
+    assert average.metadata["actors"] == ["M_Hi1", "M_Hi2", "M_Lo1", "M_Lo2"]
+    assert average.metadata["height_m"] == pytest.approx((1.79 + 1.83 + 1.81 + 1.82) / 4)
+    # without captures the average is made from the generated gaits alone, on their own skeleton
+    plain = protocol_average(load_protocol(ROOT / "protocols" / "exp2_com_vs_average.yaml"), "M", "walk", fps=30,
+                             cycles=4)
+    assert plain.joint_names[0] != "root"
