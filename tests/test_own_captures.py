@@ -248,3 +248,12 @@ def test_exp2s_average_is_made_of_the_captures_where_actors_name_them(tmp_path):
     plain = protocol_average(load_protocol(ROOT / "protocols" / "exp2_com_vs_average.yaml"), "M", "walk", fps=30,
                              cycles=4)
     assert plain.joint_names[0] != "root"
+
+
+def test_render_refuses_a_bad_capture_before_making_anything(lab, tmp_path, capsys):
+    (lab.parent / "captures" / "cmu_35_17_run.bvh").write_text("not a capture")
+    out = tmp_path / "clips"
+    assert main(["render", str(lab), "--out", str(out), "--quick"]) == 2
+    message = " ".join(capsys.readouterr().err.split())
+    assert "actors.M_Lo.motions.jog (line" in message and "not a readable BVH file" in message
+    assert not out.exists()

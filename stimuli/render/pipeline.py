@@ -159,6 +159,10 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
         raise StimuliError(f"--poses: expected one of {', '.join(SOURCES)}, got {source!r}")
     protocol = load_protocol(protocol_path)
     _check_motions_dir(protocol, motions_dir, protocol_path)
+    if source == "protocol":   # every actor's capture imports and loops, before a folder or clip is made
+        from stimuli.motion.captures import check_captures
+
+        check_captures(protocol, protocol_path)
     out_dir = Path(out_dir)
     design = build_design(protocol)
     order = [s.stimulus_id for s in design.stimuli]
