@@ -106,6 +106,17 @@ def test_validate_refuses_an_unparsable_capture(lab, capsys):
     assert "not a readable BVH file" in out
 
 
+def test_validate_reads_an_amass_capture_with_the_amass_reader(lab, capsys):
+    import numpy as np
+
+    np.savez(lab.parent / "captures" / "f_walk.npz", poses=np.zeros((3, 30)), trans=np.zeros((3, 3)),
+             mocap_framerate=30.0)
+    edit(lab, "{walk: captures/cmu_02_01_walk_mb2names_120fps.bvh}", "{walk: captures/f_walk.npz}")
+    code, out = validate(lab, capsys)
+    assert code == 2 and "actors.F_Lo.motions.walk (line" in out and "f_walk.npz" in out
+    assert "at least 22 joints" in out   # read_amass's own check of the SMPL body joints
+
+
 def test_validate_refuses_a_capture_without_a_steady_cycle_of_its_gait(lab, capsys):
     """The run named as a walk: no steady walk in it; the message names the ranges it found."""
     edit(lab, "motions: {walk: captures/cmu_35_01_walk.bvh,", "motions: {walk: captures/cmu_35_17_run.bvh,")
