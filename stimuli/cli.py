@@ -27,6 +27,7 @@ COMMAND_MODULES = [
     "stimuli.commands.survey_cmd",
     "stimuli.commands.physics_cmd",
     "stimuli.commands.render_cmd",
+    "stimuli.commands.serve_cmd",
 ]
 
 

@@ -40,7 +40,11 @@ LIBRARIES = [
 ]
 TEXTS = {"rank_step": "Choice {k}: which clip is the best of those left?", "finish": "Finish",
          "saved": "Thank you! Your answers are saved. You may close this page.",
-         "loading": "Loading the clips…", "load_error": "The clips could not be loaded. Please tell the experimenter."}
+         "loading": "Loading the clips…", "load_error": "The clips could not be loaded. Please tell the experimenter.",
+         # shapemotion serve (config.server): saving at the end, and what the participant is told if it fails
+         "saving": "Saving your answers…",
+         "save_error": "Some answers could not be saved. Please reload this page to finish the study.",
+         "start_error": "The study could not be started. Please reload this page, or tell the experimenter."}
 
 
 def node_modules() -> Path:

@@ -11,6 +11,16 @@
  *   simulate=data-only|visual   jsPsych simulation mode (for testing)
  *   save=0             do not download the CSV at the end
  *   post=URL           POST the CSV (text/csv) to URL at the end (also config.post_url)
+ *   post_trial=URL     also POST each answered trial's data (JSON) to URL as it is given (also
+ *                      config.post_trial_url); the static folder needs no server of its own for this
+ *
+ * Served by `shapemotion serve` (config.server), the page asks the server for its session instead:
+ * the server picks the list, stores each answer as it is given (one request at a time, retried on
+ * network errors), gives a reloaded page its next unanswered trial, and at the end names the
+ * completion URL. URL parameters (PROLIFIC_PID, STUDY_ID, SESSION_ID, …) are passed on to it.
+ * Each block's clips are preloaded with a progress bar; a clip that fails to load or play is recorded
+ * (failed_video in the data; in server mode also an event with the browser) and its answer buttons
+ * are enabled so the participant can go on.
  */
 (function () {
   "use strict";
@@ -35,14 +45,93 @@
   }
 
   var participant = params.get("participant") || ("p" + Math.random().toString(36).slice(2, 10));
-  var chosen = chooseList();
   var simulate = params.get("simulate");
   var postUrl = params.get("post") || cfg.post_url || "";
-  window.SHAPEMOTION_STATUS = { done: false, posted: null, list: chosen.list };
+  var postTrialUrl = params.get("post_trial") || cfg.post_trial_url || "";
+  var server = cfg.server ? serverClient() : null;
+  var chosen = null, resumed = false, playFailure = null, jsPsych = null;
+  window.SHAPEMOTION_STATUS = { done: false, posted: null, list: null, saved: 0, errors: [], failed: [] };
 
-  var jsPsych = initJsPsych({ on_finish: finish });
-  jsPsych.data.addProperties(Object.assign({ participant: participant, list: chosen.list, protocol: cfg.protocol },
-                                           chosen.groups));
+  /** Talks to `shapemotion serve`: one request at a time, so answers arrive in order. */
+  function serverClient() {
+    var key = "shapemotion:" + cfg.protocol, session = null, queue = Promise.resolve();
+
+    function request(method, path, body) {
+      var headers = { "Content-Type": "application/json" };
+      if (session) { headers["X-Session-Token"] = session.token; }
+      return fetch(path, { method: method, headers: headers, keepalive: true,
+                           body: body === undefined ? undefined : JSON.stringify(body) });
+    }
+
+    /** Send until the server answers; a 4xx is final (recorded), a network error or 5xx is retried. */
+    function send(path, body, tries) {
+      return request("POST", path, body).then(function (r) {
+        if (r.status >= 500 && tries > 0) { throw new Error("server " + r.status); }
+        return r.json().then(function (answer) {
+          if (r.status >= 400) { window.SHAPEMOTION_STATUS.errors.push(r.status + " " + answer.error); }
+          return answer;
+        });
+      }).catch(function (e) {
+        if (tries <= 0) { window.SHAPEMOTION_STATUS.errors.push(String(e)); return {}; }
+        return new Promise(function (ok) { window.setTimeout(ok, 1000); })
+          .then(function () { return send(path, body, tries - 1); });
+      });
+    }
+
+    return {
+      start: function () {
+        var stored = null, urlParams = {};
+        try { stored = JSON.parse(window.localStorage.getItem(key) || "null"); } catch (e) { stored = null; }
+        params.forEach(function (value, name) { urlParams[name] = value; });
+        return request("POST", "api/sessions", { params: urlParams, resume: stored })
+          .then(function (r) {
+            return r.json().then(function (answer) {
+              if (!r.ok) { throw new Error(answer.error || ("server " + r.status)); }
+              return answer;
+            });
+          })
+          .then(function (state) {
+            session = state;
+            try { window.localStorage.setItem(key, JSON.stringify({ session: state.session, token: state.token })); }
+            catch (e) { /* private mode: a reload then starts over unless the URL carries an id */ }
+            return state;
+          });
+      },
+      answer: function (trial, data) {
+        var body = { index: trial.index, response: data.response, rt: data.rt };
+        queue = queue.then(function () {
+          return send("api/sessions/" + session.session + "/trials", body, 30).then(function (answer) {
+            if (answer.stored !== undefined) { window.SHAPEMOTION_STATUS.saved += 1; }
+          });
+        });
+      },
+      event: function (kind, clip, detail) {
+        queue = queue.then(function () {
+          return send("api/sessions/" + session.session + "/events", { kind: kind, clip: clip, detail: detail }, 3);
+        });
+      },
+      finish: function () {
+        return queue.then(function () { return send("api/sessions/" + session.session + "/finish", {}, 30); });
+      }
+    };
+  }
+
+  /** A clip that did not load or play: in the data, and told to the server. */
+  function recordFailure(kind, clip, detail) {
+    window.SHAPEMOTION_STATUS.failed.push(kind + ":" + clip);
+    if (server) { server.event(kind, clip, detail || ""); }
+  }
+
+  /** The answered trial, as it is given: to the study server, or to post_trial=URL. */
+  function saveTrial(trial, data) {
+    if (server) { server.answer(trial, data); return; }
+    if (postTrialUrl) {
+      fetch(postTrialUrl, { method: "POST", headers: { "Content-Type": "application/json" }, keepalive: true,
+                            body: JSON.stringify(Object.assign({ user_agent: navigator.userAgent }, data)) })
+        .then(function () { window.SHAPEMOTION_STATUS.saved += 1; })
+        .catch(function (e) { window.SHAPEMOTION_STATUS.errors.push(String(e)); });
+    }
+  }
 
   function positionsData(trial) {
     var out = {};
@@ -69,6 +158,13 @@
     video.addEventListener("click", function () {
       if (video.ended) { video.currentTime = 0; video.play(); }
     });
+    video.addEventListener("error", function () {   // a clip that cannot play must not trap the participant
+      var clip = window.SHAPEMOTION_STATUS.clip;
+      playFailure = clip;
+      recordFailure("play_failed", clip, video.error ? "media error " + video.error.code : "");
+      document.querySelectorAll("#jspsych-video-button-response-btngroup button")
+        .forEach(function (b) { b.disabled = false; });
+    });
     // A browser that refuses to autoplay gets the controls, so the participant can start the clip.
     window.setTimeout(function () {
       if (video.paused && !video.ended && video.currentTime === 0) {
@@ -79,11 +175,17 @@
   }
 
   function videoTrial(trial, choices, extra) {
-    var onStart = extra.on_start;
+    var onStart = extra.on_start, onFinish = extra.on_finish;
     extra = Object.assign({}, extra, {
       on_start: function (t) {   // the clip on screen, for automation (preloaded clips play from blob: URLs)
         window.SHAPEMOTION_STATUS.clip = trial.id;
+        window.SHAPEMOTION_STATUS.position = trial.index;
+        playFailure = null;
         if (onStart) { onStart(t); }
+      },
+      on_finish: function (data) {
+        if (playFailure === trial.id) { data.failed_video = [cfg.clips[trial.id]]; }
+        if (onFinish) { onFinish(data); }
       }
     });
     return Object.assign({
@@ -102,7 +204,8 @@
   function familiarization(trial) {
     return videoTrial(trial, [cfg.text.continue], {
       prompt: "<p>" + cfg.text.fam_intro + "</p>",
-      data: trialData(trial, false)
+      data: trialData(trial, false),
+      on_finish: function (data) { saveTrial(trial, data); }
     });
   }
 
@@ -114,6 +217,7 @@
         data.response_label = labels[data.response];
         if (cfg.response.type === "likert") { data.rating = data.response + 1; }
         else { data.chosen = trial.positions[data.response]; }
+        saveTrial(trial, data);
       }
     });
   }
@@ -139,6 +243,7 @@
             if (last) {
               picked.push(remaining()[0]);
               data.response = picked.slice();
+              saveTrial(trial, data);
             }
           }
         }));
@@ -151,20 +256,27 @@
     return Object.assign({ type: jsPsychHtmlButtonResponse, stimulus: html, choices: [button] }, extra || {});
   }
 
+  /** Loads one block's clips with a progress bar; a clip that fails is recorded and the study goes on. */
+  function preload(trials, block) {
+    var clips = trials.filter(function (t) { return t.block === block; })
+      .map(function (t) { return cfg.clips[t.id]; })
+      .filter(function (c, i, all) { return all.indexOf(c) === i; });
+    return { type: jsPsychPreload, video: clips, auto_preload: false, show_progress_bar: true,
+             message: "<p>" + cfg.text.loading + "</p>", error_message: "<p>" + cfg.text.load_error + "</p>",
+             continue_after_error: true, max_load_time: 120000,
+             on_finish: function (data) {
+               (data.failed_video || []).forEach(function (url) { recordFailure("load_failed", String(url)); });
+             } };
+  }
+
   function buildTimeline() {
     var trials = chosen.trials;
-    var clips = trials.map(function (t) { return cfg.clips[t.id]; })
-      .filter(function (c, i, all) { return all.indexOf(c) === i; });
-    var timeline = [
-      { type: jsPsychPreload, video: clips, auto_preload: false, message: "<p>" + cfg.text.loading + "</p>",
-        error_message: "<p>" + cfg.text.load_error + "</p>", show_detailed_errors: true,
-        continue_after_error: false, max_load_time: 120000 },
-      screen(cfg.text.consent, cfg.text.agree),
-      screen(cfg.text.instructions, cfg.text.continue)
-    ];
+    var timeline = resumed ? [screen(cfg.text.instructions, cfg.text.continue)]
+      : [screen(cfg.text.consent, cfg.text.agree), screen(cfg.text.instructions, cfg.text.continue)];
     var nBlocks = trials.reduce(function (m, t) { return Math.max(m, t.block); }, 0);
-    var previous = null;
+    var previous = null, loaded = null;
     trials.forEach(function (trial) {
+      if (trial.block !== loaded) { timeline.push(preload(trials, trial.block)); loaded = trial.block; }
       var part = trial.block + ":" + trial.kind;
       if (part !== previous) {
         if (trial.kind === "practice") { timeline.push(screen("<p>" + cfg.text.practice_intro + "</p>", cfg.text.continue)); }
@@ -185,6 +297,7 @@
   function finish() {
     var csv = jsPsych.data.get().csv();
     window.SHAPEMOTION_CSV = csv;
+    if (server) { finishOnServer(); return; }
     if (params.get("save") !== "0") {
       jsPsych.data.get().localSave("csv", "shapemotion_" + cfg.protocol + "_" + participant + ".csv");
     }
@@ -197,7 +310,47 @@
       .then(function () { window.SHAPEMOTION_STATUS.done = true; });
   }
 
-  var timeline = buildTimeline();
-  if (simulate === "data-only" || simulate === "visual") { jsPsych.simulate(timeline, simulate); }
-  else { jsPsych.run(timeline); }
+  /** Server mode: wait until every answer is stored, then hand over to the completion URL. */
+  function finishOnServer() {
+    var display = jsPsych.getDisplayElement();
+    display.innerHTML = "<p>" + cfg.text.saving + "</p>";
+    server.finish().then(function (answer) {
+      window.SHAPEMOTION_STATUS.redirect = answer.redirect || null;
+      display.innerHTML = "<p>" + (answer.finished ? cfg.text.saved : cfg.text.save_error) + "</p>";
+      window.SHAPEMOTION_STATUS.done = true;
+      if (answer.finished && answer.redirect && params.get("redirect") !== "0") {
+        window.location.assign(answer.redirect);
+      }
+    });
+  }
+
+  /** Runs the chosen list from its first trial not yet answered. */
+  function run() {
+    window.SHAPEMOTION_STATUS.list = chosen.list;
+    window.SHAPEMOTION_DATA = function () { return jsPsych.data.get().csv(); };   // for automation
+    jsPsych = initJsPsych({ on_finish: finish });
+    jsPsych.data.addProperties(Object.assign({ participant: participant, list: chosen.list, protocol: cfg.protocol },
+                                             chosen.groups));
+    var timeline = buildTimeline();
+    if (simulate === "data-only" || simulate === "visual") { jsPsych.simulate(timeline, simulate); }
+    else { jsPsych.run(timeline); }
+  }
+
+  if (!server) { chosen = chooseList(); run(); return; }
+  server.start().then(function (state) {
+    window.SHAPEMOTION_STATUS.session = state.session;
+    participant = state.participant;
+    chosen = { list: state.list, groups: state.groups, trials: state.trials };
+    resumed = state.next > 0;
+    if (state.finished) {
+      document.body.innerHTML = "<p>" + cfg.text.saved + "</p>";
+      window.SHAPEMOTION_STATUS.done = true;
+      window.SHAPEMOTION_STATUS.redirect = state.redirect;
+      return;
+    }
+    run();
+  }).catch(function (e) {
+    window.SHAPEMOTION_STATUS.errors.push(String(e));
+    document.body.innerHTML = "<p>" + cfg.text.start_error + "</p>";
+  });
 })();
