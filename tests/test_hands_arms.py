@@ -104,12 +104,18 @@ def test_upper_arms_clear_heavy_torsos(actor_id, gait):
     assert after.max() <= 0.005, after.max()
 
 
-def test_lean_arms_are_left_alone():
-    body, motion = _on_body("M_Lo2", "walk")
+def _added_abduction_deg(actor_id: str, gait: str) -> float:
+    body, motion = _on_body(actor_id, gait)
     rot = arms.clear_arms(body, motion.rotations, motion.root_translation)
     arm = [body.rig.index("upperarm01.L"), body.rig.index("upperarm01.R")]
     w = np.abs(np.einsum("tjk,tjk->tj", rot[:, arm], np.asarray(motion.rotations)[:, arm]))
-    assert np.degrees(2 * np.arccos(np.clip(w, -1, 1))).max() < 1.0
+    return float(np.degrees(2 * np.arccos(np.clip(w, -1, 1))).max())
+
+
+def test_added_abduction_grows_with_girth():
+    # Measured: F_Lo1 0°, M_Lo2 6°, M_Hi2 12° (walk).
+    assert _added_abduction_deg("F_Lo1", "walk") < 0.01
+    assert _added_abduction_deg("M_Lo2", "walk") + 3.0 < _added_abduction_deg("M_Hi2", "walk")
 
 
 def test_render_frames_poses_each_figure_naturally_once(monkeypatch):
@@ -134,3 +140,29 @@ def test_render_frames_poses_each_figure_naturally_once(monkeypatch):
     with pytest.raises(Seen):
         next(render_frames(replace(look, layout="side_by_side"), [figure, figure]))
     assert [s[0] for s in seen] == [body, body] and seen[0][1] == (look.n_frames, body.rig.n_bones, 4)
+
+
+@functools.lru_cache(maxsize=None)
+def _cmu_walk():
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import make_loop
+    from stimuli.render.thesis_sources import BASE_WALK
+
+    return make_loop(read_bvh(BASE_WALK), cycles=2)
+
+
+@pytest.mark.parametrize("actor_id", ["MP35", "M_Hi2"])
+def test_cmu_walk_leaves_no_shoulder_hump(actor_id):
+    """The bundled CMU walk on obese bodies (the thesis mesh row, ``preview``): the shoulder tops stay
+    within 1.5 cm of their rest height above the neck's base. Before (the clavicle's direction copied
+    from CMU's steeper clavicle, a 20–27° shrug) they rose 4.0 cm (MP35) and 4.5 cm (M_Hi2)."""
+    body = body_for_actor(ACTORS[actor_id])
+    motion = retarget(_cmu_walk(), body)
+    rise = arms.shoulder_rise(body, motion.rotations, motion.root_translation)
+    assert rise.max() <= 0.015, rise.max()
+    c, s = body.rig.index("clavicle.L"), body.rig.index("shoulder01.L")
+    heads = body.rig.forward_kinematics(motion.rotations, motion.root_translation)[1]
+    slope = np.degrees(np.arcsin((heads[:, s, 1] - heads[:, c, 1]) / np.linalg.norm(heads[:, s] - heads[:, c], axis=1)))
+    rest = body.rig.rest_heads
+    rest_slope = np.degrees(np.arcsin((rest[s, 1] - rest[c, 1]) / np.linalg.norm(rest[s] - rest[c])))
+    assert abs(slope.mean() - rest_slope) < 5.0

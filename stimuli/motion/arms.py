@@ -208,20 +208,19 @@ def arm_penetration(body, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     Signed distance of each upper-arm vertex along the outward normal of its nearest torso vertex
     (flank below the armpit), counted where that vertex is near and the arm vertex lies along its normal.
     """
-    from stimuli.render.dynamic import vertex_normals
-
     verts = np.asarray(vertices, float).reshape(-1, body.n_vertices, 3)
-    torso, arms = _arm_sets(body)
-    operator = _normal_operator(body)
+    torso, arms, faces, operator = _flank(body)
     depth = np.zeros((len(verts), 2))
     worst = np.full((len(verts), 2), -1)
     for t, v in enumerate(verts):
-        normals = vertex_normals(v, body.faces, operator)[torso]
-        tree = cKDTree(v[torso])
+        flank = v[torso]
+        normals = operator @ np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        tree = cKDTree(flank)
         for k, side in enumerate(("L", "R")):
             p = v[arms[side]]
             dist, near = tree.query(p)
-            off = p - v[torso][near]
+            off = p - flank[near]
             signed = np.einsum("ij,ij->i", off, normals[near])
             lateral = np.linalg.norm(off - signed[:, None] * normals[near], axis=1)
             inside = (dist < NEAR_M) & (lateral < LATERAL_M) & (signed < 0)
@@ -231,15 +230,29 @@ def arm_penetration(body, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return depth, worst
 
 
-def _normal_operator(body):
-    from stimuli.render.dynamic import vertex_normal_operator
-
-    cached = getattr(body, "_arm_normal_operator", None)
+def _flank(body):
+    """The torso flank's vertices, the upper arms' vertices, the faces around the flank and the
+    (flank vertices × those faces) normal operator — cached on the body (normals of the flank only:
+    the whole mesh's cost most of the time)."""
+    cached = getattr(body, "_arm_flank", None)
     if cached is None:
-        cached = vertex_normal_operator(np.asarray(body.faces), body.n_vertices)
+        import scipy.sparse
+
+        torso, arms = _arm_sets(body)
+        faces = np.asarray(body.faces)
+        around = faces[np.isin(faces, torso).any(axis=1)]
+        row = {v: i for i, v in enumerate(torso)}
+        rows, cols = [], []
+        for f, tri in enumerate(around):
+            for v in tri:
+                if v in row:
+                    rows.append(row[v])
+                    cols.append(f)
+        operator = scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(torso), len(around)))
+        cached = (torso, arms, around, operator)
         try:
-            object.__setattr__(body, "_arm_normal_operator", cached)
-        except (AttributeError, TypeError):
+            body._arm_flank = cached
+        except (AttributeError, TypeError):  # a frozen body: recomputed each call
             pass
     return cached
 
@@ -278,6 +291,50 @@ def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEAR
             turn = quat.from_axis_angle(_unit(axis_parent) * (sign * need)[:, None])
             rot[:, arm] = quat.mul(turn, rot[:, arm])
     return rot
+
+
+def shoulder_rise(body, rotations, root_translation) -> np.ndarray:
+    """How far (m) the top of each shoulder rises above the neck's base beyond the rest pose's, per
+    frame and side (T, 2: L, R): the hump of shrugged shoulders.
+
+    The shoulder top is the rest mesh's skin over the shoulder (outward of the ``shoulder01`` joint,
+    inward of the upper-arm joint, above it); its highest point is measured from the posed
+    ``neck01`` head.
+    """
+    rig = body.rig
+    verts = body.skin(rotations, root_translation)
+    neck = rig.forward_kinematics(rotations, root_translation)[1][:, rig.index("neck01"), 1]
+    rest = np.asarray(body.vertices, float)
+    out = np.zeros((len(verts), 2))
+    for k, side in enumerate(("L", "R")):
+        arm = rig.rest_heads[rig.index(f"upperarm01.{side}")]
+        inner = rig.rest_heads[rig.index(f"shoulder01.{side}")]
+        x = rest[:, 0] * np.sign(arm[0])
+        top = np.flatnonzero((x > abs(inner[0])) & (x < abs(arm[0])) & (rest[:, 1] > arm[1]))
+        rest_rise = rest[top, 1].max() - rig.rest_heads[rig.index("neck01"), 1]
+        out[:, k] = verts[:, top, 1].max(axis=1) - neck - rest_rise
+    return out
+
+
+def clavicle_world(source_grot: np.ndarray, roles: dict[str, int], chest_world: np.ndarray) -> dict[str, np.ndarray]:
+    """World rotations (T, 4) of Anny's clavicles, per side ("l", "r"): the target's chest with the
+    source clavicle's motion about its clip mean (relative to the source's chest).
+
+    Retargeting the clavicle's direction instead copied the source skeleton's build: a CMU clavicle
+    runs from low on the thorax up to the shoulder, 20–27° steeper than Anny's, so every CMU walk
+    shrugged Anny's shoulders — the "hump" on heavy bodies, whose shoulder flesh then bulges above
+    the neck's base. The shrug and protraction that belong to the gait (a few degrees) are kept.
+    ``roles`` without a clavicle or chest leave that side out (its clavicle follows the chest).
+    """
+    chest = roles.get("chest", roles.get("pelvis"))
+    out = {}
+    for side in ("l", "r"):
+        if f"{side}_clavicle" not in roles or chest is None:
+            continue
+        relative = quat.mul(quat.inv(source_grot[:, chest]), source_grot[:, roles[f"{side}_clavicle"]])
+        about_mean = quat.mul(relative, quat.inv(quat.mean(relative))[None])
+        out[side] = quat.mul(chest_world, about_mean)
+    return out
 
 
 def natural_pose(body, rotations, root_translation) -> np.ndarray:

@@ -24,6 +24,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.motion import quat
+from stimuli.motion.arms import clavicle_world
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
 from stimuli.motion.contact import contact_mask, foot_contacts
@@ -123,8 +124,12 @@ def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
     head = grot[:, roles["head"]] if "head" in roles else chest
     for i, name in enumerate(NECK):
         world[rig.index(name)] = quat.slerp(chest, head, np.full(t, (i + 1) / len(NECK)))
+    # Clavicles: the source's clavicle motion about its mean, on the target's chest (arms.clavicle_world:
+    # a CMU clavicle's own slope shrugged Anny's shoulders into a hump on heavy bodies).
+    for side, q in clavicle_world(grot, roles, world[rig.index("spine01")]).items():
+        world[rig.index(f"clavicle.{side.upper()}")] = q
     for bone, (driver, (a, b)) in LIMBS.items():
-        if driver not in roles or a not in roles or b not in roles:
+        if driver not in roles or a not in roles or b not in roles or bone.startswith("clavicle."):
             continue
         tb = {"upperleg01": "lowerleg01", "lowerleg01": "foot", "foot": "toe1-1", "clavicle": "upperarm01",
               "upperarm01": "lowerarm01", "lowerarm01": "wrist"}[bone.split(".")[0]] + "." + bone.split(".")[1]
