@@ -166,3 +166,10 @@ def test_cmu_walk_leaves_no_shoulder_hump(actor_id):
     rest = body.rig.rest_heads
     rest_slope = np.degrees(np.arcsin((rest[s, 1] - rest[c, 1]) / np.linalg.norm(rest[s] - rest[c])))
     assert abs(slope.mean() - rest_slope) < 5.0
+
+
+def test_docstring_examples():
+    import doctest
+
+    result = doctest.testmod(arms)
+    assert result.attempted > 0 and result.failed == 0

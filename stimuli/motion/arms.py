@@ -18,11 +18,11 @@ physics — gets them once.
 
 Examples
 --------
->>> from stimuli.bodies.api import fit_body                                    # doctest: +SKIP
->>> body = fit_body("M", 1.83, 35.8)                                           # doctest: +SKIP
->>> rot = relax_hands(body.rig, body.rest_pose()[0])                            # doctest: +SKIP
->>> finger_curl_deg(body.rig, rot)[0] > finger_curl_deg(body.rig, body.rest_pose()[0])[0] + 30  # doctest: +SKIP
-True
+>>> from stimuli.bodies.api import fit_body
+>>> body = fit_body("M", 1.83, 35.8)
+>>> rest = body.rest_pose()[0]
+>>> [round(float(f(body.rig, x)[0])) for f in (finger_curl_deg, finger_spread_deg) for x in (rest, relax_hands(body.rig, rest))]
+[26, 90, 33, 18]
 """
 
 from __future__ import annotations
@@ -36,9 +36,8 @@ from scipy.spatial import cKDTree
 from stimuli.motion import quat
 
 # Relaxed-hand flexion (degrees) of the proximal, middle and distal phalanx of fingers 2–5 (index to
-# little): a resting hand's cascade, about 20–35° at the knuckle, 30–45° at the middle joint, more
-# towards the little finger (resting hand posture, e.g. Jaworski & Kozakiewicz 2016, and the usual
-# "position of rest" of hand surgery texts).
+# little): the cascade of a hand hanging at rest, more flexion towards the little finger. The values
+# were chosen and checked by eye on rendered frames (a curled, not clenched, hand), not fitted to data.
 FINGER_CURL_DEG = {2: (20.0, 30.0, 12.0), 3: (24.0, 35.0, 14.0), 4: (28.0, 40.0, 16.0), 5: (32.0, 45.0, 18.0)}
 THUMB_CURL_DEG = (8.0, 12.0, 10.0)
 # Fraction of each proximal phalanx's rest splay from the middle finger that the relaxed hand removes.
@@ -97,22 +96,8 @@ def _bone_direction(rig, bone: int) -> np.ndarray:
     return _unit(h[bone] - h[rig.parents[bone]])
 
 
-@functools.lru_cache(maxsize=64)
-def _relaxed_hand_cached(key) -> dict[int, np.ndarray]:
-    return _relaxed_hand(_RIGS[key])
-
-
-_RIGS: dict = {}
-
-
 def relaxed_hand(rig) -> dict[int, np.ndarray]:
     """Local rotations (w-first quaternions, rest-world axes) of the finger bones of a relaxed hand."""
-    key = (tuple(rig.names), np.asarray(rig.rest_heads).round(6).tobytes())
-    _RIGS[key] = rig
-    return _relaxed_hand_cached(key)
-
-
-def _relaxed_hand(rig) -> dict[int, np.ndarray]:
     out = {}
     for side in ("L", "R"):
         n = _palm_normal(rig, side)
@@ -156,7 +141,8 @@ def relax_hands(rig, rotations) -> np.ndarray:
 
 def finger_curl_deg(rig, rotations) -> np.ndarray:
     """Per frame, the mean over fingers 2–5 and both hands of the angle between the metacarpal
-    (wrist to knuckle) and the middle phalanx: knuckle plus middle-joint flexion (≈0 for a flat hand)."""
+    (wrist to knuckle) and the middle phalanx: knuckle plus middle-joint flexion (26° on Anny's flat
+    rest hand, whose metacarpals and phalanges are not in line)."""
     heads = _heads(rig, rotations)
     out = []
     for s in ("L", "R"):
