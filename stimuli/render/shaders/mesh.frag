@@ -21,11 +21,9 @@ struct Material {
 uniform Material material;
 uniform DirectionalLight directional_lights[MAX_DIRECTIONAL_LIGHTS];
 uniform int n_directional_lights;
-uniform vec3 cam_pos;
 uniform vec3 ambient_light;
 
-in vec3 frag_position;
-flat in mat3 frag_turn;
+in vec3 frag_view;
 in vec3 frag_local;
 #ifdef NORMAL_LOC
 in vec3 frag_normal;
@@ -54,7 +52,7 @@ void main()
         frag_color = base;  // unlit surface (the floor): its colours are final display colours
         return;
     }
-    vec3 v = normalize(cam_pos - frag_position);
+    vec3 v = normalize(frag_view);
 #ifdef NORMAL_LOC
     vec3 n = normalize(frag_normal);
 #else
@@ -68,11 +66,11 @@ void main()
     float shine = 1.0 - material.roughness_factor;
     // A compile-time bound lets the shader compiler unroll the loop (much faster on llvmpipe);
     // the scene always has exactly MAX_DIRECTIONAL_LIGHTS directional lights.
-    // The lights are set for a figure facing the protocol's azimuth and turn with each mesh's
-    // rotation (a side-by-side slot is turned ~20 deg to face the camera): both figures are lit
-    // alike, not one more from the front than the other. Unturned meshes see the lights as set.
+    // n and v are in the mesh's own frame (mesh.vert), so the lights, set for an unturned figure,
+    // turn with each mesh's rotation (a side-by-side slot is turned ~20 deg to face the camera):
+    // both figures are lit alike, not one more from the front than the other.
     for (int i = 0; i < MAX_DIRECTIONAL_LIGHTS; i++) {
-        vec3 l = normalize(frag_turn * -directional_lights[i].direction);
+        vec3 l = -directional_lights[i].direction;
         float wrapped = max((dot(n, l) + 0.25) * 0.8, 0.0);  // soft terminator: "soft" lights
         light += directional_lights[i].color * directional_lights[i].intensity * wrapped;
         float s = max(dot(n, normalize(l + v)), 0.0);

@@ -16,8 +16,11 @@ uniform mat4 M;
 uniform mat4 V;
 uniform mat4 P;
 
-out vec3 frag_position;
-flat out mat3 frag_turn;   // the mesh's rotation: lights turn with the figure (mesh.frag)
+uniform vec3 cam_pos;
+
+// Shading happens in the mesh's own (rotated) frame: normal and view direction are turned back by
+// the mesh's rotation, so the lights turn with each figure's slot (mesh.frag).
+out vec3 frag_view;        // towards the camera, in the mesh's frame
 out vec3 frag_local;       // the mesh's own coordinates: where the contact shadow falls (mesh.frag)
 #ifdef NORMAL_LOC
 out vec3 frag_normal;
@@ -33,11 +36,11 @@ void main()
 {
     mat4 model = M * inst_m;
     gl_Position = P * V * model * vec4(position, 1.0);
-    frag_position = vec3(model * vec4(position, 1.0));
-    frag_turn = mat3(model);
+    vec3 world = vec3(model * vec4(position, 1.0));
+    frag_view = transpose(mat3(model)) * (cam_pos - world);   // poses are rigid: transpose = inverse
     frag_local = position;
 #ifdef NORMAL_LOC
-    frag_normal = mat3(model) * normal;
+    frag_normal = normal;
 #endif
 #ifdef TEXCOORD_0_LOC
     uv_0 = texcoord_0;
