@@ -104,6 +104,15 @@ def test_upper_arms_clear_heavy_torsos(actor_id, gait):
     assert after.max() <= 0.005, after.max()
 
 
+def test_upper_arms_clear_the_thesis_body_with_the_cmu_walk():
+    """The thesis mesh row's walk: the bundled CMU capture on MP35 (BMI 38). Before: 6.0 cm deep."""
+    body = body_for_actor(ACTORS["MP35"])
+    motion = retarget(_cmu_walk(), body)
+    rot = arms.natural_pose(body, motion.rotations, motion.root_translation)
+    after, _ = arms.arm_penetration(body, body.skin(rot, motion.root_translation))
+    assert after.max() <= 0.005, after.max()
+
+
 def _added_abduction_deg(actor_id: str, gait: str) -> float:
     body, motion = _on_body(actor_id, gait)
     rot = arms.clear_arms(body, motion.rotations, motion.root_translation)

@@ -243,7 +243,7 @@ def _flank(body):
     return cached
 
 
-def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEARANCE_M, passes: int = 3) -> np.ndarray:
+def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEARANCE_M, passes: int = 5) -> np.ndarray:
     """``rotations`` (T, J, 4) with each upper arm abducted, frame by frame, just enough to keep its skin
     ``clearance_m`` outside the torso's (:func:`arm_penetration`).
 
