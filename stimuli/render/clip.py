@@ -164,10 +164,10 @@ def render_frames(look: Look, figures: list[Figure], frame_height_m: float | Non
         for parts in zip(*streams):
             yield np.concatenate(parts, axis=1)
         return
-    # Relaxed hands and arms clear of the torso, once per figure, for every motion source.
-    figures = [replace(f, rotations=natural_pose(f.body, f.rotations, f.root_translation)) for f in figures]
     poses, view = placements(look, len(figures), tallest)
     dots = look.layout == "point_light"
+    if not dots:  # relaxed hands, arms clear of the torso: once per mesh figure, whatever the motion's source
+        figures = [replace(f, rotations=natural_pose(f.body, f.rotations, f.root_translation)) for f in figures]
     stage = Stage(view, hex_colour(look.background), lit=not dots)
     roots = [centred_root(f) for f in figures]
     treadmills, floor = [], None
