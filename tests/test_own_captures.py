@@ -27,6 +27,9 @@ from stimuli.render.pipeline import plan
 ROOT = Path(__file__).resolve().parents[1]
 OWN = ROOT / "protocols" / "exp1_own_captures.yaml"
 CAPTURES = ROOT / "protocols" / "captures"
+# YAML lines of the two captured actors' motions, as the messages must name them
+LINES = {actor: next(i for i, line in enumerate(OWN.read_text().splitlines(), 1) if capture in line)
+         for actor, capture in (("M_Lo", "cmu_35_01_walk.bvh"), ("F_Lo", "cmu_02_01_walk"))}
 
 
 @pytest.fixture
@@ -65,20 +68,21 @@ def test_a_capture_is_a_file_name_or_a_file_with_its_range():
 
 @pytest.mark.parametrize("old, new, expected", [
     ("captures/cmu_35_01_walk.bvh,", "captures/cmu_35_01_walk.c3d,",
-     ["actors.0.motions.walk.file (line 33; actor M_Lo, gait walk)", "not a motion capture", ".bvh", ".npz"]),
+     ["actors.0.motions.walk.file (line {M_Lo}; actor M_Lo, gait walk)", "not a motion capture", ".bvh", ".npz"]),
     ("captures/cmu_35_01_walk.bvh,", "{file: captures/cmu_35_01_walk.bvh, start_s: 3.0, end_s: 2.0},",
-     ["actors.0.motions.walk.end_s (line 33; actor M_Lo, gait walk)", "must come after start_s"]),
+     ["actors.0.motions.walk.end_s (line {M_Lo}; actor M_Lo, gait walk)", "must come after start_s"]),
     ("captures/cmu_35_01_walk.bvh,", "{file: captures/cmu_35_01_walk.bvh, start: 1},",
-     ["actors.0.motions.walk.start (line 33; actor M_Lo, gait walk)", "unknown field", "file, start_s, end_s"]),
+     ["actors.0.motions.walk.start (line {M_Lo}; actor M_Lo, gait walk)", "unknown field", "file, start_s, end_s"]),
     ("{walk: captures/cmu_02_01_walk_mb2names_120fps.bvh}", "{walk: {file: captures/x.bvh, start_s: -1}}",
-     ["actors.2.motions.walk.start_s (line 51; actor F_Lo, gait walk)", "greater than or equal to 0"]),
+     ["actors.2.motions.walk.start_s (line {F_Lo}; actor F_Lo, gait walk)", "greater than or equal to 0"]),
     ("jog: captures/cmu_35_17_run.bvh", "sprint: captures/cmu_35_17_run.bvh",
-     ["actors.M_Lo.motions.sprint (line 33;", "actor M_Lo", "'sprint'", "not declared under gaits"]),
+     ["actors.M_Lo.motions.sprint (line {M_Lo};", "actor M_Lo", "'sprint'", "not declared under gaits"]),
 ])
 def test_a_bad_capture_field_names_the_actor_gait_and_line(old, new, expected):
     with pytest.raises(StimuliError) as err:
         parse_protocol(OWN.read_text().replace(old, new, 1), "own.yaml")
     for part in expected:
+        part = part.format(**LINES)
         assert part in str(err.value), (part, str(err.value))
 
 
@@ -163,7 +167,7 @@ def test_the_manifest_records_each_clips_motion_source():
     assert captured["motion_range_s"] == "0.617-2.858"
     generated = motion_columns(p, stimuli["M-jog-Lo-Hi"])   # M_Hi has no capture
     assert generated["motion_source"] == "generator" and generated["motion_file"] == generated["motion_sha256"] == ""
-    assert "actor=M_Hi;sex=M;height_m=1.78;bmi=31;gait=jog;cadence_spm=136.4;speed_mps=2.2;seed=2023" == \
+    assert "actor=M_Hi;sex=M;height_m=1.79;bmi=32.1;gait=jog;cadence_spm=136.4;speed_mps=2.2;seed=2023" == \
         generated["motion_params"]
     # Exp 2's clips show averages, not one actor's gait: the columns stay empty
     exp2 = load_protocol(ROOT / "protocols" / "exp2_com_vs_average.yaml")
