@@ -298,9 +298,13 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_server(design: Path, port: int) -> subprocess.Popen:
+def start_server(design: Path, port: int, *options: str) -> subprocess.Popen:
+    """``shapemotion serve`` in a process of its own, once it answers (the caller kills it); its log is
+    ``serve.log`` beside the design folder (a pipe nobody reads would block a chatty server)."""
+    log = (design.parent / "serve.log").open("ab")
     proc = subprocess.Popen([sys.executable, "-m", "stimuli.cli", "serve", str(design), "--port", str(port),
-                             "--admin-token", ADMIN], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                             "--admin-token", ADMIN, *options], stdout=log, stderr=log)
+    log.close()
     import httpx
 
     deadline = time.monotonic() + 30
@@ -310,7 +314,7 @@ def start_server(design: Path, port: int) -> subprocess.Popen:
             return proc
         except httpx.TransportError:
             if proc.poll() is not None:
-                raise AssertionError(proc.stderr.read().decode())
+                raise AssertionError((design.parent / "serve.log").read_text())
             time.sleep(0.2)
     proc.kill()
     raise AssertionError("the server did not start in 30 s")

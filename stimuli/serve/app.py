@@ -162,14 +162,13 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
         except ValueError as exc:
             raise Refused(422, f"trial {index}: {exc}") from None
         row = export_row(study, session, trial, response, rt)
-        stored = db.answer(session["id"], index)
-        if stored is not None:                        # a retry of a stored answer is fine; a change is not
-            if stored["response"] != row["response"]:
+        position = len(db.answered(session["id"]))   # answers are stored in order: 0 … position - 1
+        if index < position:                          # a retry of a stored answer is fine; a change is not
+            if db.answer(session["id"], index)["response"] != row["response"]:
                 raise Refused(409, f"trial {index}: already answered with another response")
-            return JSONResponse({"stored": False, "next": len(db.answered(session["id"]))})
+            return JSONResponse({"stored": False, "next": position})
         if session["finished"] is not None:
             raise Refused(409, "this session is finished")
-        position = len(db.answered(session["id"]))
         if index != position:
             raise Refused(409, f"index: trial {index} is not the next unanswered one ({position})")
         db.add_answer(session["id"], index, row, clock())

@@ -123,7 +123,8 @@ class Database:
     # -- answers and events -----------------------------------------------------------------------
     def add_answer(self, sid: str, position: int, row: dict, now: float) -> bool:
         """Store one answer; False when that position was already stored (a retried request)."""
-        with self.lock:
+        with self.lock, self.conn:   # one transaction: the answer and the session's last-seen time
+            self.conn.execute("BEGIN")
             cur = self.conn.execute("INSERT OR IGNORE INTO answers VALUES (?, ?, ?, ?)",
                                     (sid, position, json.dumps(row), now))
             self.conn.execute("UPDATE sessions SET seen = ? WHERE id = ?", (now, sid))
