@@ -170,10 +170,13 @@ def normative_curves() -> dict:
     return out
 
 
-def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normative: dict | None = None) -> list[Path]:
+def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normative: dict | None = None,
+              gait: str = "walk") -> list[Path]:
     """Five panels as in the paper: root CoM, knee moment, knee flexion, then the baselines.
 
     ``curves`` maps an actor label to :func:`gait_curves` output (plus ``bmi`` and ``sex``).
+    The baseline panels draw the CGM2.3 walking norm for a walk; for any other ``gait`` they say
+    that no norm of that gait is bundled (a walking band under a jog would read as a comparison).
     Writes ``<out_stem>.png`` and ``.svg``.
     """
     import matplotlib
@@ -205,10 +208,14 @@ def plot_fig7(curves: dict[str, dict], out_stem: Path, title: str = "", normativ
                      label=f"reference{f' {sex}' if sex else ''} (NoCOM, kinematic)")
     for ax, key, name in ((axes[3], "knee_extension_moment_nm_per_kg", "Baseline knee moment (N·m/kg)"),
                           (axes[4], "knee_flexion_deg", "Baseline knee flexion (°)")):
+        ax.set_title(name)
+        if gait != "walk":
+            ax.text(0.5, 0.5, f"no running norm bundled ({gait})\nCGM2.3 norms are for walking",
+                    ha="center", va="center", transform=ax.transAxes, fontsize=9)
+            continue
         band = normative[key]
         ax.fill_between(pct, band["low"], band["high"], color="0.8", label="CGM2.3 normative ±1 SD")
         ax.plot(pct, band["mean"], "k-", lw=1)
-        ax.set_title(name)
         ax.legend(fontsize=7)
     for ax, (_, name) in zip(axes, panels):
         ax.set_title(name)

@@ -195,3 +195,45 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
     mujoco.mju_quat2Vel(err, err_q, 1.0)
     torque = gains.k_pr * err + gains.k_dr * target["root_omega"][i]
     return np.concatenate([force, torque])
+
+
+# Actuator torque limits (N·m), the same for every body (fat mass adds no muscle): rounded maximal
+# voluntary isometric torques of healthy young adults, per joint and Euler axis (X: flexion/
+# extension, Z: ab-/adduction or inversion/eversion, Y: axial rotation; the larger direction of
+# each pair). Sources: Harbo, Brincks & Andersen (2012), "Maximal isokinetic and isometric muscle
+# strength of major muscle groups related to age, body mass, height, and sex in 178 healthy
+# subjects", Eur J Appl Physiol 112:267–275 (hip, knee, ankle, shoulder, elbow flexion/extension);
+# Anderson, Madigan & Nussbaum (2007), "Maximum voluntary joint torque as a function of joint
+# angle and angular velocity", J Biomech 40:3105–3113 (hip, knee, ankle); trunk and neck, and the
+# secondary axes, from the same order of magnitude of published norms. The values are rounded up
+# to the men's norms (the larger), so a limit binds only where a body would need more than a
+# strong adult could give; not re-checked against the papers' tables in this session.
+TORQUE_LIMITS_NM = {
+    "spine": {"X": 250.0, "Z": 200.0, "Y": 100.0},
+    "neck": {"X": 60.0, "Z": 50.0, "Y": 30.0},
+    "shoulder": {"X": 100.0, "Z": 100.0, "Y": 60.0},
+    "elbow": {"": 80.0},
+    "hip": {"X": 250.0, "Z": 150.0, "Y": 80.0},
+    "knee": {"": 250.0},
+    "ankle": {"X": 200.0, "Z": 60.0, "Y": 40.0},
+}
+
+
+def torque_limit(dof: str) -> float:
+    """Torque limit (N·m) of a ragdoll DoF name (``knee.L``, ``hip.R:X``).
+
+    >>> torque_limit("knee.L"), torque_limit("hip.R:X"), torque_limit("ankle.L:Z")
+    (250.0, 250.0, 60.0)
+    """
+    joint, _, axis = dof.partition(":")
+    return TORQUE_LIMITS_NM[joint.split(".")[0]][axis]
+
+
+def set_torque_limits(model, limits: dict[str, float] | None = None) -> np.ndarray:
+    """Clamp every actuator's total torque (PD + feed-forward) to its limit; returns the limits."""
+    names = [model.actuator(a).name for a in range(model.nu)]
+    lim = np.array([limits[n] if limits else torque_limit(n) for n in names])
+    model.actuator_forcelimited[:] = 1
+    model.actuator_forcerange[:, 0] = -lim
+    model.actuator_forcerange[:, 1] = lim
+    return lim

@@ -124,7 +124,8 @@ def _job(args: dict) -> dict:
     motion = Motion.load(args["motion"])
     body = fit_body(args["sex"], args["height_m"], args["bmi"], **args["girths"])
     ref_body = fit_body(args["sex"], *args["reference"])
-    result = retarget(motion, body, args["weight_kg"], reference_body=ref_body)
+    result = retarget(motion, body, args["weight_kg"], reference_body=ref_body,
+                      feedforward=args.get("feedforward", False))
     report = result.report
     report["actor"] = args["actor"]
     report["gait"] = args["gait"]
@@ -144,8 +145,11 @@ def _job(args: dict) -> dict:
 
 
 def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | Path | None = None,
-                 workers: int = 2, progress=None) -> dict:
+                 workers: int = 2, progress=None, feedforward: bool = False) -> dict:
     """Make every COM motion of the protocol under ``out``.
+
+    ``feedforward``: the PD plus the inverse-dynamics feed-forward of the NoCOM motion on its
+    reference body (:func:`stimuli.physics.retarget.retarget`); default the paper's pure PD.
 
     Returns ``{"reports": [...], "figures": [...], "warnings": [...]}``; ``progress`` (optional) is
     called with a line per simulated motion.
@@ -178,6 +182,8 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
             spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
                     "girths": actor_girths(actor), "weight_kg": actor.weight_kg, "gait": gait,
                     "reference": list(reference)}
+            if feedforward:   # only then: the pure-PD cache keys stay those of earlier runs
+                spec["feedforward"] = True
             key = _key(nocom_path, spec, gains_text)
             job = dict(spec, motion=str(nocom_path), out_motion=str(cache / f"{key}.npz"),
                        out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}")
@@ -237,7 +243,7 @@ def _figures(protocol, reports: list[dict], out: Path, plot) -> list[Path]:
         curves = {f"{r['body']['sex']}/{r['actor']}": dict(r["fig7"], bmi=r["body"]["bmi"], sex=r["body"]["sex"])
                   for r in reports if r["gait"] == gait and "fig7" in r and not r["actor"].split("_")[-1].startswith("P")}
         if curves:
-            paths += plot(curves, out / f"fig7_{gait}", title=f"{protocol.name}: COM method, {gait}")
+            paths += plot(curves, out / f"fig7_{gait}", title=f"{protocol.name}: COM method, {gait}", gait=gait)
     return paths
 
 

@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.physics import inertia
-from stimuli.physics.controller import Gains, motion_gait, set_joint_gains
+from stimuli.physics.controller import Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit
 from stimuli.physics.output import joint_rms_difference, to_motion
 from stimuli.physics.ragdoll import build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
@@ -103,6 +103,7 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
         # Steps with neither foot on the floor: a walk has none (double support instead); the
         # tracked ragdoll still hops between steps (readme: known limits).
         "flight_fraction": round(float((~sim.foot_contact.any(axis=1)).mean()), 4) if len(sim.foot_contact) else None,
+        "torque_peaks_nm": torque_peaks(sim),
         "fell": bool(sim.fell), "fall_time_s": sim.fall_time_s, "fall_reason": sim.fall_reason,
         "simulated_s": round(sim.simulated_s, 4), "wall_s": round(sim.wall_s, 4),
         "wall_per_simulated": round(sim.wall_s / sim.simulated_s, 4), "timestep_s": sim.timestep,
@@ -115,6 +116,31 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
     return report
 
 
+def torque_peaks(sim) -> dict[str, dict[str, float]]:
+    """Per DoF: peak |actuator torque| (N·m) over the recorded pass and the human limit it is held to.
+
+    The limit (:data:`stimuli.physics.controller.TORQUE_LIMITS_NM`) is reported whether or not the
+    simulation enforced it, so a pure-PD run shows where it asks for more than a strong adult has.
+    """
+    if not len(sim.actuator_force):
+        return {}
+    peaks = np.abs(sim.actuator_force).max(axis=0)
+    return {d: {"peak": round(float(p), 1), "limit": torque_limit(d)} for d, p in zip(sim.dof_names, peaks)}
+
+
+def reference_flight_fraction(motion) -> float:
+    """Share of the motion's frames with neither foot down (the shared contact model).
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> reference_flight_fraction(generate(GaitParams(gait="walk"), 1.75))
+    0.0
+    """
+    from stimuli.motion.contact import foot_contacts
+
+    down = foot_contacts(motion).down
+    return round(float((~(down["l"] | down["r"])).mean()), 4)
+
+
 def _body_row(body, weight_kg: float) -> dict:
     h = float(body.anthropometry.height_m)
     return {"body_id": body.body_id, "sex": body.sex, "height_m": round(h, 4), "weight_kg": round(weight_kg, 3),
@@ -122,7 +148,8 @@ def _body_row(body, weight_kg: float) -> dict:
 
 
 def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
-             min_simulated_s: float = 4.0, rate_hz: float = DEFAULT_RATE_HZ, raise_on_fall: bool = False) -> RetargetResult:
+             min_simulated_s: float = 4.0, rate_hz: float = DEFAULT_RATE_HZ, raise_on_fall: bool = False,
+             feedforward: bool = False, torque_limits: bool = False) -> RetargetResult:
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
@@ -131,17 +158,30 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     (its ``.result`` holds the report); otherwise ``result.motion`` is None after a fall.
     The clip is simulated in whole passes, at least ``min_simulated_s`` in all (the paper's 4-s
     clips); the last pass is the COM motion, the ones before it are warm-up.
+    ``feedforward``: add the inverse-dynamics torques of the motion on the *reference* body
+    (:mod:`stimuli.physics.feedforward`) to the PD; ``torque_limits``: clamp every actuator to the
+    human limits of :data:`stimuli.physics.controller.TORQUE_LIMITS_NM` (the same for every body).
+    Both default off: the shipped controller is the paper's pure PD (readme: Controller variants).
     """
     weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
     inertia.check_weight(weight, float(body.anthropometry.height_m))
     ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
+    if torque_limits:
+        set_torque_limits(model)
+    ff = None
+    if feedforward:
+        from stimuli.physics.feedforward import reference_feedforward
+
+        ff = reference_feedforward(motion, reference_body or body)
     warmup_loops = max(1, int(np.ceil(min_simulated_s / ref.period - 1.0 - 1e-9)))
-    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz)
+    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz, feedforward=ff)
     out, nocom = None, None
     if not sim.fell:
         out = to_motion(motion, body, sim, ref, ragdoll)
         nocom = joint_rms_difference(motion, out, ref, ragdoll)
     report = build_report(sim, ragdoll, body, reference_body or body, weight, gains, nocom)
+    report["controller"] = {"feedforward": bool(feedforward), "torque_limits": bool(torque_limits)}
+    report["reference_flight_fraction"] = reference_flight_fraction(motion)
     result = RetargetResult(out, report, sim, ref, ragdoll)
     if sim.fell and raise_on_fall:
         err = RagdollFellError(f"the ragdoll of body {body.body_id} ({weight:.1f} kg) fell at "

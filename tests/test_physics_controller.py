@@ -1,0 +1,177 @@
+"""The controller of issue 21: inverse-dynamics feed-forward on the reference body, human torque
+limits, gains fixed across bodies, and the flight figures on a real capture.
+
+The non-slow tests use a generated walk and short simulations (< 30 s together); the ``slow`` ones
+run the bundled CMU 35_01 walk (a real capture) and record where the acceptance is not met yet as
+strict expected failures: they turn into failures the day the controller meets it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+
+@pytest.fixture(scope="module")
+def body():
+    from stimuli.bodies import fit_body
+
+    return fit_body("F", 1.61, 24.42)
+
+
+@pytest.fixture(scope="module")
+def heavy():
+    from stimuli.bodies import fit_body
+
+    return fit_body("F", 1.60, 28.1)
+
+
+@pytest.fixture(scope="module")
+def walk():
+    from stimuli.motion.generate import GaitParams, generate
+
+    return generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.61, fps=30, cycles=2)
+
+
+def _floating_tracking_error(walk, body, use_feedforward: bool, seconds: float = 1.0) -> float:
+    """Largest joint error (degrees) of a ragdoll with contacts and gravity's support off (free
+    floating, the root wrench of inverse dynamics applied) at 1 % of the walking gains."""
+    from stimuli.physics import feedforward as ff
+    from stimuli.physics.controller import Gains
+    from stimuli.physics.retarget import prepare
+
+    gains = Gains.load(gait="walk")
+    gains = dataclasses.replace(gains, k_p=gains.k_p * 0.01, k_d=gains.k_d * 0.1)
+    ref, _, model, gains = prepare(walk, body, None, gains)
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    dt = model.opt.timestep
+    t = np.arange(int(seconds / dt)) * dt
+    states = ff.reference_states(ref, t)
+    torque, residual = ff.inverse_torques(model, states, np.zeros((len(t), 2), bool), (0, 0))
+    assert model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_CONTACT)   # flags restored as they were
+    data = mujoco.MjData(model)
+    qadr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
+    vadr = np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
+    data.qpos[:3], data.qpos[3:7], data.qpos[qadr] = states["root_pos"][0], states["root_quat"][0], states["q"][0]
+    data.qvel[:3], data.qvel[3:6], data.qvel[vadr] = states["root_vel"][0], states["root_omega_local"][0], states["qd"][0]
+    kv = model.actuator_biasprm[:, 2].copy()
+    worst = 0.0
+    for i in range(len(t) - 1):
+        data.ctrl[:] = states["q"][i]
+        if use_feedforward:   # as simulate() does: inverse dynamics + the PD damping's k_d q̄̇
+            model.actuator_biasprm[:, 0] = torque[i] - kv * states["qd"][i]
+            data.qfrc_applied[:6] = residual[i]
+        mujoco.mj_step(model, data)
+        worst = max(worst, float(np.abs(data.qpos[qadr] - states["q"][i + 1]).max()))
+    return float(np.degrees(worst))
+
+
+def test_feedforward_reproduces_the_reference_with_low_gains(walk, body):
+    # Inverse dynamics of the reference, played forward: at 1 % of the gains the ragdoll follows
+    # the reference to within a degree over a second (0.7° at worst on this walk; finite-difference
+    # accelerations); the PD alone drifts by tens of degrees.
+    assert _floating_tracking_error(walk, body, True) < 1.5
+    assert _floating_tracking_error(walk, body, False) > 5.0
+
+
+def test_inverse_dynamics_ground_force_carries_the_body(walk, body):
+    # Over a whole cycle the vertical ground force averages the body weight (no net vertical
+    # acceleration of a loop); in the reference's contact frames it is all put on the feet.
+    from stimuli.physics import feedforward as ff
+    from stimuli.physics.ragdoll import build_ragdoll, compile_model
+    from stimuli.physics.reference import build_reference
+
+    ref, ragdoll = build_reference(walk, body, lambda axes: build_ragdoll(body, None, axes))
+    ones = {d: 1.0 for d in ragdoll.dof_names}
+    model = compile_model(ragdoll, 1e-3, ones, ones)
+    states = ff.reference_states(ref, np.arange(ref.n_frames) / ref.fps)
+    for key in ("root_acc", "root_alpha_local", "qdd"):
+        states[key] = ff.periodic_lowpass(states[key], ref.fps)
+    stance = ff.reference_stance(walk, ref.n_frames)
+    _, free = ff.inverse_torques(model, states, np.zeros_like(stance), (0, 0))
+    weight = float(model.body_subtreemass[0]) * 9.81
+    assert free[:, 1].mean() == pytest.approx(weight, rel=0.02)
+    feet = (model.body("foot.L").id, model.body("foot.R").id)
+    _, residual = ff.inverse_torques(model, states, stance, feet)
+    assert stance.any(axis=1).all()                      # a walk: always a foot down
+    assert np.abs(residual).max() < 1e-6 * weight        # so the feet take the whole root wrench
+
+
+def test_torque_limits_are_respected_with_feedforward(walk, body, heavy):
+    from stimuli.physics.controller import set_torque_limits, torque_limit
+    from stimuli.physics.feedforward import reference_feedforward
+    from stimuli.physics.retarget import prepare
+    from stimuli.physics.simulate import simulate
+
+    ref, ragdoll, model, gains = prepare(walk, heavy)
+    limits = set_torque_limits(model)
+    assert limits.tolist() == [torque_limit(d) for d in ragdoll.dof_names]
+    assert torque_limit("knee.R") == 250.0 and torque_limit("ankle.L:X") == 200.0
+    sim = simulate(model, ref, gains, warmup_loops=0, duration_s=1.0, feedforward=reference_feedforward(walk, body))
+    assert not sim.fell
+    peaks = np.abs(sim.actuator_force).max(axis=0)
+    assert (peaks <= limits + 1e-6).all()
+    assert (peaks >= limits - 1e-6).any() or peaks.max() > 50   # the limits are real torques, not zero
+    assert model.actuator_biasprm[:, 0].tolist() == [0.0] * model.nu   # the model is left as it was
+
+
+def test_gains_are_fixed_across_bodies_and_the_report_shows_the_controller(walk, body, heavy):
+    from stimuli.physics.controller import Gains
+    from stimuli.physics.retarget import retarget
+
+    shipped = Gains.load(gait="walk")
+    reports = [retarget(walk, b, reference_body=body, feedforward=True, min_simulated_s=1.0).report for b in (body, heavy)]
+    for r in reports:
+        assert r["gains"] == reports[0]["gains"]
+        assert (r["gains"]["k_p"], r["gains"]["k_d"]) == (shipped.k_p, shipped.k_d)   # the same gains.json entry
+        assert r["controller"] == {"feedforward": True, "torque_limits": False}
+        assert r["reference_flight_fraction"] == 0.0
+        assert set(r["torque_peaks_nm"]) == set(shipped.profile)
+        assert all(v["limit"] > 0 and v["peak"] >= 0 for v in r["torque_peaks_nm"].values())
+        assert not r["fell"]
+    assert reports[0]["b_m"] == 0.0 and reports[1]["b_m"] > 0.0
+
+
+def test_reference_flight_fraction_of_a_jog_is_its_flight_phases():
+    from stimuli.motion.generate import GaitParams, generate
+    from stimuli.physics.retarget import reference_flight_fraction
+
+    jog = generate(GaitParams(gait="jog"), 1.75)
+    assert 0.05 < reference_flight_fraction(jog) < 0.4
+
+
+def _cmu_walk(cycles: int):
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import make_loop
+    from stimuli.physics.tune import DATA
+
+    return make_loop(read_bvh(DATA / "cmu_35_01_walk.bvh"), cycles=cycles).resample(30.0)
+
+
+@pytest.mark.slow   # three 4-s simulations of a real capture
+@pytest.mark.xfail(strict=True, reason="issue 21 acceptance not met: the CMU 35_01 walk hops 10-15 % of its steps "
+                                       "on the base body with or without the feed-forward (docs/readme_physics.md)")
+def test_real_walk_keeps_a_foot_down_with_feedforward():
+    from stimuli.bodies import fit_body
+    from stimuli.physics.retarget import retarget
+
+    report = retarget(_cmu_walk(2), fit_body("M", 1.75, 23.0), feedforward=True).report
+    assert not report["fell"]
+    assert report["tracking_rms_deg_overall"] <= 3.0
+    assert report["flight_fraction"] <= report["reference_flight_fraction"] + 0.03
+
+
+@pytest.mark.slow   # three 4-s simulations of a real capture
+def test_flight_share_of_1_2_4_cycle_loops_agrees():
+    # 1-, 2- and 4-cycle loops of one capture give the same flight share within 3 points (measured:
+    # 12.8 / 12.9 / 12.9 % with the feed-forward, 14.8 / 14.7 / 14.8 % pure PD).
+    from stimuli.bodies import fit_body
+    from stimuli.physics.retarget import retarget
+
+    body = fit_body("M", 1.75, 23.0)
+    flights = [retarget(_cmu_walk(c), body, feedforward=True).report["flight_fraction"] for c in (1, 2, 4)]
+    assert max(flights) - min(flights) <= 0.03
