@@ -152,7 +152,8 @@ def test_the_export_is_read_by_analyze_as_a_jspsych_file(served, tmp_path):
             body = "Hi1" if t["id"].endswith("Hi1") else "Lo1"
             assert answer(served, s, t["index"], ratings[n][body] - 1).status_code == 200
         served.post(f"/api/sessions/{s['session']}/finish", json={}, headers={"X-Session-Token": s["token"]})
-    start(served, participant="dropout")                      # started, answered nothing: no rows
+    dropout = start(served, participant="dropout")           # one answer, never finished
+    answer(served, dropout, 0)
     csv = served.get("/admin/export.csv", headers={"Authorization": f"Bearer {ADMIN}"})
     assert csv.status_code == 200
     (tmp_path / "responses.csv").write_text(csv.text)
@@ -160,6 +161,9 @@ def test_the_export_is_read_by_analyze_as_a_jspsych_file(served, tmp_path):
     assert result.reconciles, result.summary()
     assert result.summary()["participants"] == 4 and result.summary()["answers"] == 16
     assert not result.summary()["columns_not_imported"]
+    # the finished sessions end with jsPsych's closing row; the dropout's answer is excluded as unfinished
+    reasons = result.exclusions.loc[result.exclusions["participant"] == "dropout", "reason"]
+    assert reasons.tolist() == ["unfinished"]
     for row in result.data.itertuples():
         assert int(row.rating) == ratings[int(row.participant[1:])][row.BODY]
 

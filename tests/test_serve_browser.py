@@ -133,6 +133,8 @@ def test_participants_in_chromium_are_saved_balanced_and_analysed_alike(tmp_path
         server["proc"].wait(10)
     assert server.get("restarted")
     rows = pd.read_csv(io.StringIO(export.text), dtype=str, keep_default_na=False)
+    assert (rows["end"] == "1").sum() == WAVE_ONE + WAVE_TWO - len(ABANDON)   # each finished session's closing row
+    rows = rows[rows["end"] != "1"]
 
     # every answered trial is in the database once
     assert not rows.duplicated(["participant", "trial_index"]).any()
@@ -155,8 +157,7 @@ def test_participants_in_chromium_are_saved_balanced_and_analysed_alike(tmp_path
     # analyze on the export = analyze on the same answers as the page's jsPsych data
     finished_ids = {f"pid{n:02d}" for n, r in log.items() if r["finished"]}
     (tmp_path / "export.csv").write_text(export.text)
-    served = pd.read_csv(tmp_path / "export.csv", dtype=str, keep_default_na=False)
-    served = served[served["participant"].isin(finished_ids)]
+    served = pd.read_csv(tmp_path / "export.csv", dtype=str, keep_default_na=False)   # abandoned ones included
     page_frames = [pd.read_csv(io.StringIO(f), dtype=str, keep_default_na=False) for r in log.values()
                    if r["finished"] for f in r["frames"]]
     page_rows = pd.concat(page_frames, ignore_index=True)

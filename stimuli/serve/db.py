@@ -139,11 +139,11 @@ class Database:
         rows = self.conn.execute("SELECT position FROM answers WHERE session = ? ORDER BY position", (sid,))
         return [r[0] for r in rows]
 
-    def answer_rows(self) -> list[dict]:
-        """Every stored answer's export row, by session start and list position."""
-        rows = self.conn.execute("SELECT a.row FROM answers a JOIN sessions s ON s.id = a.session "
+    def answer_rows(self) -> list[tuple[str, dict]]:
+        """(session id, export row) of every stored answer, by session start and list position."""
+        rows = self.conn.execute("SELECT a.session, a.row FROM answers a JOIN sessions s ON s.id = a.session "
                                  "ORDER BY s.started, s.id, a.position").fetchall()
-        return [json.loads(r[0]) for r in rows]
+        return [(sid, json.loads(row)) for sid, row in rows]
 
     def count_answers(self) -> dict[str, int]:
         return dict(self.conn.execute("SELECT session, COUNT(*) FROM answers GROUP BY session").fetchall())

@@ -22,6 +22,9 @@ from stimuli.fileio import atomic_write_text
 from stimuli.serve.db import Database
 
 FIRST = ["rt", "trial_type", "trial_index", "participant", "session", "list"]
+# The fields of an answer row that belong to its trial (what a closing row leaves out).
+TRIAL_KEYS = {"rt", "trial_type", "trial_index", "stimulus_id", "clip_id", "kind", "practice", "block", "block_label",
+              "trial", "repetition", "left", "right", "positions", "response", "response_label", "rating", "chosen"}
 SESSION_FIELDS = ["session", "participant", "list", "status", "answers", "started", "finished", "browser",
                   "failed_clips", "params"]
 
@@ -35,14 +38,31 @@ def column_order(rows: list[dict]) -> list[str]:
 
 
 def export_csv(db: Database) -> str:
-    """Every stored answer, one row each (quoted like jsPsych's own CSV)."""
-    rows = db.answer_rows()
+    """Every stored answer, one row each (quoted like jsPsych's own CSV); a finished session ends with
+    the closing row (``end`` = 1) the static runtime writes, so ``analyze`` excludes unfinished ones."""
+    finished = {s["id"] for s in db.sessions() if s["finished"] is not None}
+    rows: list[dict] = []
+    answers = db.answer_rows()
+    for i, (sid, row) in enumerate(answers):
+        rows.append(row)
+        if sid in finished and (i + 1 == len(answers) or answers[i + 1][0] != sid):
+            rows.append(closing_row(row))
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=column_order(rows), quoting=csv.QUOTE_ALL, lineterminator="\n",
                             restval="")
     writer.writeheader()
     writer.writerows(rows)
     return out.getvalue()
+
+
+def closing_row(last: dict) -> dict:
+    """The end screen's row after a session's last answer: its participant, list and groups, ``end`` = 1.
+
+    >>> closing_row({"participant": "p1", "list": 2, "SEX": "F", "trial_index": 3, "stimulus_id": "x", "rt": 5})
+    {'participant': 'p1', 'list': 2, 'SEX': 'F', 'trial_type': 'html-button-response', 'trial_index': 4, 'end': 1}
+    """
+    row = {k: v for k, v in last.items() if k not in TRIAL_KEYS}
+    return row | {"trial_type": "html-button-response", "trial_index": last["trial_index"] + 1, "end": 1}
 
 
 def sessions_csv(db: Database) -> str:

@@ -17,7 +17,8 @@
  * Served by `shapemotion serve` (config.server), the page asks the server for its session instead:
  * the server picks the list, stores each answer as it is given (one request at a time, retried on
  * network errors), gives a reloaded page its next unanswered trial, and at the end names the
- * completion URL. URL parameters (PROLIFIC_PID, STUDY_ID, SESSION_ID, …) are passed on to it.
+ * completion URL (redirect=0: stay on the page). URL parameters (PROLIFIC_PID, STUDY_ID, SESSION_ID,
+ * …) are passed on to it.
  * Each block's clips are preloaded with a progress bar; a clip that fails to load or play is recorded
  * (failed_video in the data; in server mode also an event with the browser) and its answer buttons
  * are enabled so the participant can go on.
@@ -342,10 +343,11 @@
     participant = state.participant;
     chosen = { list: state.list, groups: state.groups, trials: state.trials };
     resumed = state.next > 0;
-    if (state.finished) {
+    if (state.finished) {   // a finished participant who comes back is handed over again
       document.body.innerHTML = "<p>" + cfg.text.saved + "</p>";
       window.SHAPEMOTION_STATUS.done = true;
       window.SHAPEMOTION_STATUS.redirect = state.redirect;
+      if (state.redirect && params.get("redirect") !== "0") { window.location.assign(state.redirect); }
       return;
     }
     run();
