@@ -122,9 +122,13 @@ def test_torque_limits_are_respected_with_feedforward(walk, body, heavy):
 def test_gains_are_fixed_across_bodies_and_the_report_shows_the_controller(walk, body, heavy):
     from stimuli.physics.controller import Gains
     from stimuli.physics.retarget import retarget
+    from stimuli.physics.tune import tune_for_motion
 
     shipped = Gains.load(gait="walk")
-    reports = [retarget(walk, b, reference_body=body, feedforward=True, min_simulated_s=1.0).report for b in (body, heavy)]
+    chosen = tune_for_motion(walk, body, scales=(1.0, 0.5), progress=lambda line: None)   # on the reference body
+    assert chosen.tuning["met"] and chosen.tuning["scale"] == 1.0 and len(chosen.tuning["history"]) == 1
+    reports = [retarget(walk, b, reference_body=body, gains=chosen, feedforward=True, min_simulated_s=1.0).report
+               for b in (body, heavy)]
     for r in reports:
         assert r["gains"] == reports[0]["gains"]
         assert (r["gains"]["k_p"], r["gains"]["k_d"]) == (shipped.k_p, shipped.k_d)   # the same gains.json entry

@@ -161,3 +161,61 @@ def tune_gaits(gaits=GAITS, target_rms_deg: float = TARGET_RMS_DEG, out: Path | 
             sets[gait] = Gains.load(out, gait)
     save_gains(sets, out)
     return tuned
+
+
+# Per-motion gain choice (issue 21): the gait's base gains scaled by one of these factors (k_p ×
+# s, k_d × √s: the same damping ratio), the one that best meets the flight and tracking bounds on
+# the motion's own reference body; then fixed for every target body of that motion.
+MOTION_GAIN_SCALES = (1.0, 0.71, 0.5, 0.35, 0.25)
+# Acceptance bounds per gait: simulated flight share at most the reference's + (walk) or within
+# (jog) this many points, and tracking RMS (degrees).
+FLIGHT_BOUND = {"walk": 0.03, "jog": 0.05}
+TRACKING_BOUND_DEG = {"walk": 3.0, "jog": 4.0}
+
+
+def motion_gain_score(gait: str, flight: float, reference_flight: float, rms_deg: float) -> float:
+    """How far one run misses the bounds: flight excess in points plus tracking excess in degrees (0: met).
+
+    >>> motion_gain_score("walk", 0.02, 0.0, 2.0), round(motion_gain_score("walk", 0.10, 0.0, 3.5), 2)
+    (0.0, 7.5)
+    """
+    excess = flight - reference_flight if gait == "walk" else abs(flight - reference_flight)
+    return 100 * max(0.0, excess - FLIGHT_BOUND[gait]) + max(0.0, rms_deg - TRACKING_BOUND_DEG[gait])
+
+
+def tune_for_motion(motion, reference_body, feedforward: bool = True, scales=MOTION_GAIN_SCALES,
+                    progress=print) -> Gains:
+    """The gains of one reference motion, chosen on its reference body and then kept for every body.
+
+    Runs the motion on ``reference_body`` at each gain scale of its gait's set (:data:`MOTION_GAIN_SCALES`)
+    and keeps the stiffest scale that meets the bounds (:func:`motion_gain_score` = 0), else the
+    one that misses them least. The returned :class:`Gains` (history in ``tuning``) is passed as
+    ``gains=`` to :func:`stimuli.physics.retarget.retarget` for every target body.
+    """
+    import dataclasses
+
+    from stimuli.physics.controller import motion_gait
+    from stimuli.physics.retarget import retarget
+
+    gait = motion_gait(motion)
+    base = Gains.load(gait=gait)
+    history = []
+    for scale in scales:
+        gains = dataclasses.replace(base, k_p=base.k_p * scale, k_d=base.k_d * np.sqrt(scale))
+        report = retarget(motion, reference_body, reference_body=reference_body, gains=gains, feedforward=feedforward).report
+        score = 1e3 if report["fell"] else motion_gain_score(gait, report["flight_fraction"],
+                                                              report["reference_flight_fraction"],
+                                                              report["tracking_rms_deg_overall"])
+        history.append({"scale": scale, "flight_fraction": report["flight_fraction"],
+                        "reference_flight_fraction": report["reference_flight_fraction"],
+                        "tracking_rms_deg": report["tracking_rms_deg_overall"], "score": score})
+        progress(f"{gait}: gains × {scale:g}: flight {report['flight_fraction']} (reference "
+                 f"{report['reference_flight_fraction']}), tracking {report['tracking_rms_deg_overall']}°, score {score:.2f}")
+        if score == 0.0:
+            break   # the stiffest scale that meets the bounds
+    best = min(history, key=lambda h: h["score"])
+    gains = dataclasses.replace(base, k_p=base.k_p * best["scale"], k_d=base.k_d * np.sqrt(best["scale"]))
+    gains.tuning = {"method": "per-motion scale of the gait's base gains on the motion's reference body",
+                    "feedforward": feedforward, "scale": best["scale"], "met": best["score"] == 0.0,
+                    "history": history}
+    return gains
