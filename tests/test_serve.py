@@ -206,6 +206,7 @@ def test_each_bad_request_gets_a_4xx_and_changes_nothing(served):
         "JSON not an object": served.post(f"/api/sessions/{sid}/trials", headers=tok, json=[1, 2]),
         "bad event": served.post(f"/api/sessions/{sid}/events", headers=tok, json={"kind": "hack", "clip": "x"}),
         "bad participant id": served.post("/api/sessions", json={"params": {"participant": "<script>"}}),
+        "participant id with a newline": served.post("/api/sessions", json={"params": {"PROLIFIC_PID": "abc\n"}}),
         "database": served.get("/shapemotion-serve.db"),
         "../ path": served.get("/clips/../shapemotion-serve.db"),
         "encoded ../ path": served.get("/clips/%2e%2e/shapemotion-serve.db"),

@@ -14,6 +14,8 @@ import asyncio
 import io
 import os
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -172,3 +174,51 @@ def test_participants_in_chromium_are_saved_balanced_and_analysed_alike(tmp_path
     assert result_a.summary()["answers"] == result_b.summary()["answers"] == 4 * len(finished_ids)
     pd.testing.assert_frame_equal(table_a.effects, table_b.effects)
     assert table_a.effect("BODY")["F"] > 10
+
+
+def test_a_clip_that_cannot_play_is_recorded_and_does_not_trap_the_participant(tmp_path):
+    """Clips whose bytes load but do not decode: each trial records play_failed (with the browser in the
+    sessions table) and enables the answers, so the participant finishes."""
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed (make setup installs it)")
+    from playwright.sync_api import sync_playwright
+
+    from test_serve import make_design
+
+    design = make_design(tmp_path / "design")       # placeholder bytes, not video
+    port = free_port()
+    proc = start_server(design, port)
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+            page = browser.new_page()
+            page.goto(f"http://127.0.0.1:{port}/?participant=broken&redirect=0")
+            page.get_by_role("button", name="I agree").click()
+            page.get_by_role("button", name="Continue").click()
+            for _ in range(4):
+                page.wait_for_function(f"() => !document.querySelector('{BUTTONS}').disabled", timeout=30_000)
+                page.locator(BUTTONS, has_text="Medium").click()
+            page.get_by_role("button", name="Finish").click()
+            page.wait_for_function("() => window.SHAPEMOTION_STATUS.done", timeout=30_000)
+            status = page.evaluate("window.SHAPEMOTION_STATUS")
+            data = pd.read_csv(io.StringIO(page.evaluate("window.SHAPEMOTION_DATA()")), dtype=str,
+                               keep_default_na=False)
+            browser.close()
+        exported = subprocess_export(design, tmp_path / "r.csv")
+    finally:
+        proc.kill()
+        proc.wait(10)
+    assert len(status["failed"]) == 4 and all(f.startswith("play_failed:") for f in status["failed"])
+    assert (data.loc[data["clip_id"] != "", "failed_video"] != "").all()
+    answers, sessions = exported
+    assert (answers["end"] == "1").sum() == 1 and (answers["response"] == "1").sum() == 4
+    (row,) = sessions.itertuples()
+    assert row.status == "finished" and "Chrome" in row.browser and row.failed_clips.count("play_failed:") == 4
+
+
+def subprocess_export(design: Path, out: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``shapemotion serve export`` of the running server's database (WAL: readable while it serves)."""
+    subprocess.run([sys.executable, "-m", "stimuli.cli", "serve", "export", str(design), "--out", str(out)],
+                   check=True, capture_output=True)
+    return tuple(pd.read_csv(path, dtype=str, keep_default_na=False)
+                 for path in (out, out.with_name(f"{out.stem}_sessions.csv")))

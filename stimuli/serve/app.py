@@ -80,7 +80,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
     def own_session(request: Request) -> dict:
         sid = request.path_params["sid"]
         token = request.headers.get("x-session-token", "")
-        session = db.session(sid) if SESSION_ID.match(sid) else None
+        session = db.session(sid) if SESSION_ID.fullmatch(sid) else None
         if session is None:
             raise Refused(404, f"session {sid[:20]!r}: no such session")
         if not hmac.compare_digest(token.encode(), session["token"].encode()):
@@ -115,19 +115,19 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
         # URL parameters are kept for the record only when plain (ids, group levels): a platform's
         # other parameters must not stop a participant from starting
         params = {k: v for k, v in list(given.items())[:50] if isinstance(k, str) and len(k) <= 40
-                  and isinstance(v, str) and PARAM_VALUE.match(v)}
+                  and isinstance(v, str) and PARAM_VALUE.fullmatch(v)}
         id_param = study.participant_param()
         for name in (id_param, "participant"):
             if name in given and name not in params and given[name] != "":
                 raise Refused(400, f"{name}: expected 1 to 64 letters, digits or _.-")
         resume = body.get("resume")
         if isinstance(resume, dict) and isinstance(resume.get("session"), str):
-            session = db.session(resume["session"]) if SESSION_ID.match(resume["session"]) else None
+            session = db.session(resume["session"]) if SESSION_ID.fullmatch(resume["session"]) else None
             if session and hmac.compare_digest(str(resume.get("token", "")).encode(), session["token"].encode()):
                 db.touch(session["id"], clock())
                 return JSONResponse(state(session))
         participant = params.get(id_param) or params.get("participant") or None
-        if participant is not None and not PARTICIPANT_ID.match(participant):
+        if participant is not None and not PARTICIPANT_ID.fullmatch(participant):
             raise Refused(400, f"{id_param}: expected 1 to 64 letters, digits or _.-")
         if participant is not None and (session := db.session_of(participant)):
             db.touch(session["id"], clock())          # a returning participant gets their own session back

@@ -159,13 +159,23 @@
     video.addEventListener("click", function () {
       if (video.ended) { video.currentTime = 0; video.play(); }
     });
-    video.addEventListener("error", function () {   // a clip that cannot play must not trap the participant
-      var clip = window.SHAPEMOTION_STATUS.clip;
+    // A clip that cannot play must not trap the participant: record it and enable the answers. With
+    // <source> children the error fires on the last source, not on the video; NETWORK_NO_SOURCE catches
+    // an error that fired before these listeners were attached.
+    var clip = window.SHAPEMOTION_STATUS.clip;
+    function failed() {
+      if (playFailure === clip) { return; }
       playFailure = clip;
-      recordFailure("play_failed", clip, video.error ? "media error " + video.error.code : "");
+      recordFailure("play_failed", clip, video.error ? "media error " + video.error.code : "no playable source");
       document.querySelectorAll("#jspsych-video-button-response-btngroup button")
         .forEach(function (b) { b.disabled = false; });
-    });
+    }
+    video.addEventListener("error", failed);
+    var sources = video.querySelectorAll("source");
+    if (sources.length) { sources[sources.length - 1].addEventListener("error", failed); }
+    window.setTimeout(function () {
+      if (video.error || video.networkState === HTMLMediaElement.NETWORK_NO_SOURCE) { failed(); }
+    }, 1500);
     // A browser that refuses to autoplay gets the controls, so the participant can start the clip.
     window.setTimeout(function () {
       if (video.paused && !video.ended && video.currentTime === 0) {
