@@ -3,7 +3,7 @@
 Starts the real server (uvicorn, one process, SQLite in WAL mode) on 127.0.0.1 with a design of 100
 lists × 32 trials (4 bodies × 8 repetitions; the bundled Experiment 2 protocol has 64 test trials a participant; 32 keeps the run
 short), then 100 participants each start a session and post every trial as fast as the server answers
-(httpx, asyncio). Prints the throughput (stored trials per second) and the latency percentiles of the
+(httpx, asyncio; ``--think-s 2`` paces them like people watching clips). Prints the throughput (stored trials per second) and the latency percentiles of the
 trial requests. A lab's busiest minute is a few hundred trials: the server needs a few trials per second.
 
     .venv/bin/python benchmarks/serve_bench.py [--participants 100]
@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
+import random
 import socket
 import subprocess
 import sys
@@ -80,11 +81,14 @@ def start_server(design: Path, port: int) -> subprocess.Popen:
     raise SystemExit("the server did not start within 60 s")
 
 
-async def participant(client: httpx.AsyncClient, n: int, latencies: list[float]) -> int:
+async def participant(client: httpx.AsyncClient, n: int, latencies: list[float], think_s: float) -> int:
     r = await client.post("/api/sessions", json={"params": {"PROLIFIC_PID": f"bench{n}"}})
     state = r.json()
     headers = {"X-Session-Token": state["token"]}
+    pause = random.Random(n)
     for trial in state["trials"]:
+        if think_s:   # a participant watching the clip: think_s ± 50 % between answers
+            await asyncio.sleep(think_s * pause.uniform(0.5, 1.5))
         t0 = time.perf_counter()
         r = await client.post(f"/api/sessions/{state['session']}/trials", headers=headers,
                               json={"index": trial["index"], "response": (n + trial["index"]) % 7, "rt": 900})
@@ -95,12 +99,12 @@ async def participant(client: httpx.AsyncClient, n: int, latencies: list[float])
     return len(state["trials"])
 
 
-async def run(url: str, participants: int) -> tuple[int, float, list[float]]:
+async def run(url: str, participants: int, think_s: float) -> tuple[int, float, list[float]]:
     latencies: list[float] = []
     limits = httpx.Limits(max_connections=participants)
     async with httpx.AsyncClient(base_url=url, limits=limits, timeout=60) as client:
         t0 = time.perf_counter()
-        counts = await asyncio.gather(*(participant(client, n, latencies) for n in range(participants)))
+        counts = await asyncio.gather(*(participant(client, n, latencies, think_s) for n in range(participants)))
         elapsed = time.perf_counter() - t0
     return sum(counts), elapsed, latencies
 
@@ -108,6 +112,8 @@ async def run(url: str, participants: int) -> tuple[int, float, list[float]]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--participants", type=int, default=100)
+    parser.add_argument("--think-s", type=float, default=0.0,
+                        help="seconds between a participant's answers (0: as fast as the server answers)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         design = Path(tmp) / "design"
@@ -115,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         port = free_port()
         proc = start_server(design, port)
         try:
-            trials, elapsed, latencies = asyncio.run(run(f"http://127.0.0.1:{port}", args.participants))
+            trials, elapsed, latencies = asyncio.run(run(f"http://127.0.0.1:{port}", args.participants,
+                                                         args.think_s))
             stored = httpx.get(f"http://127.0.0.1:{port}/admin/progress",
                                headers={"Authorization": f"Bearer {ADMIN}"}).json()
         finally:
@@ -124,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     in_db = sum(p["answers"] for p in stored)
     finished = sum(p["finished"] for p in stored)
     ms = np.array(latencies) * 1000
-    print(f"serve: {args.participants} participants posting at once, {trials} trials in {elapsed:.2f} s "
+    pace = f"one answer every {args.think_s:g} s ± 50 % each" if args.think_s else "as fast as answered"
+    print(f"serve: {args.participants} participants at once ({pace}), {trials} trials in {elapsed:.2f} s "
           f"on {os.cpu_count()} CPUs")
     print(f"  throughput  {trials / elapsed:.0f} trials/s")
     print(f"  latency     p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms, "
