@@ -179,3 +179,20 @@ def test_flight_share_of_1_2_4_cycle_loops_agrees():
     body = fit_body("M", 1.75, 23.0)
     flights = [retarget(_cmu_walk(c), body, feedforward=True).report["flight_fraction"] for c in (1, 2, 4)]
     assert max(flights) - min(flights) <= 0.03
+
+
+def test_an_overground_capture_is_looped_first_or_refused_with_the_command():
+    from stimuli.bodies import fit_body
+    from stimuli.errors import StimuliError
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.physics.retarget import loop_input, retarget
+    from stimuli.physics.tune import DATA
+
+    raw = read_bvh(DATA / "cmu_35_01_walk.bvh")
+    assert not raw.metadata.get("looped") and not raw.metadata.get("treadmill")
+    looped, here = loop_input(raw)
+    assert here and looped.metadata["looped"] and looped.metadata["gait"] == "walk"
+    report = retarget(raw.resample(30.0), fit_body("M", 1.75, 23.0), min_simulated_s=1.0).report
+    assert report["looped_input"] and not report["fell"]
+    with pytest.raises(StimuliError, match=r"motion import FILE --loop --gait walk --start S --end S"):
+        loop_input(raw.slice(0, int(0.8 * raw.fps)))     # under one steady cycle

@@ -174,7 +174,10 @@ def _body(sex: str, height: float, weight: float, allow_nearest: bool, what: str
 def _motion_notes(args, motion) -> list[str]:
     """What the user should know about the motion before a simulation that takes a while."""
     notes = []
-    if not motion.metadata.get("looped"):
+    if not motion.metadata.get("looped") and not motion.metadata.get("treadmill"):
+        notes.append(f"{args.motion} is an overground capture: it is looped first (its steadiest straight range, "
+                     "as `shapemotion motion import FILE --loop` does)")
+    elif not motion.metadata.get("looped"):
         notes.append(f"{args.motion} is not a loop (imported without --loop?): the simulation repeats it with a "
                      "jump where its end meets its start; `shapemotion motion import FILE --loop` makes a loop")
     if args.gait is None and not motion.metadata.get("gait"):

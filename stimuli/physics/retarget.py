@@ -141,6 +141,28 @@ def reference_flight_fraction(motion) -> float:
     return round(float((~(down["l"] | down["r"])).mean()), 4)
 
 
+def loop_input(motion):
+    """``(motion, looped_here)``: an overground capture (neither looped nor on a treadmill) becomes a
+    treadmill loop of its gait (:func:`stimuli.motion.loop.capture_loop`); loops and treadmill clips
+    pass unchanged. A capture with no steady straight cycle is refused, naming the command that
+    loops it by hand (the simulation repeats its clip: an unlooped capture would jump at the seam
+    and walk off the treadmill).
+    """
+    meta = motion.metadata
+    if meta.get("looped") or meta.get("treadmill"):
+        return motion, False
+    from stimuli.motion.loop import capture_loop
+
+    gait = motion_gait(motion)
+    try:
+        looped = capture_loop(motion, gait)
+    except StimuliError as exc:
+        raise StimuliError(f"{exc}. The COM method simulates loops: choose a range with `shapemotion motion import "
+                           f"FILE --loop --gait {gait} --start S --end S`") from None
+    looped.metadata.setdefault("gait", gait)
+    return looped, True
+
+
 def _body_row(body, weight_kg: float) -> dict:
     h = float(body.anthropometry.height_m)
     return {"body_id": body.body_id, "sex": body.sex, "height_m": round(h, 4), "weight_kg": round(weight_kg, 3),
@@ -162,9 +184,12 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     (:mod:`stimuli.physics.feedforward`) to the PD; ``torque_limits``: clamp every actuator to the
     human limits of :data:`stimuli.physics.controller.TORQUE_LIMITS_NM` (the same for every body).
     Both default off: the shipped controller is the paper's pure PD (readme: Controller variants).
+    An overground capture is looped first (:func:`loop_input`); ``result.motion`` is then the COM
+    motion of that loop.
     """
     weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
     inertia.check_weight(weight, float(body.anthropometry.height_m))
+    motion, looped_here = loop_input(motion)
     ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
     if torque_limits:
         set_torque_limits(model)
@@ -182,6 +207,7 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     report = build_report(sim, ragdoll, body, reference_body or body, weight, gains, nocom)
     report["controller"] = {"feedforward": bool(feedforward), "torque_limits": bool(torque_limits)}
     report["reference_flight_fraction"] = reference_flight_fraction(motion)
+    report["looped_input"] = looped_here
     result = RetargetResult(out, report, sim, ref, ragdoll)
     if sim.fell and raise_on_fall:
         err = RagdollFellError(f"the ragdoll of body {body.body_id} ({weight:.1f} kg) fell at "
