@@ -1,12 +1,13 @@
 """Benchmark of ``shapemotion serve``: 100 simulated participants posting their answers at once.
 
 Starts the real server (uvicorn, one process, SQLite in WAL mode) on 127.0.0.1 with a design of 100
-lists × 32 trials (4 bodies × 8 repetitions; the bundled Experiment 2 protocol has 64 test trials a participant; 32 keeps the run
-short), then 100 participants each start a session and post every trial as fast as the server answers
-(httpx, asyncio; ``--think-s 2`` paces them like people watching clips). Prints the throughput (stored trials per second) and the latency percentiles of the
-trial requests. A lab's busiest minute is a few hundred trials: the server needs a few trials per second.
+lists × 32 trials (4 bodies × 8 repetitions; the bundled Experiment 2 protocol has 64 test trials a
+participant, 32 keeps the run short), then 100 participants each start a session and post every
+trial as fast as the server answers (httpx, asyncio; ``--think-s 1`` paces them like people watching
+clips). Prints the throughput (stored trials per second) and the latency percentiles of the trial
+requests. A lab's busiest minute is a few hundred trials: the server needs a few trials per second.
 
-    .venv/bin/python benchmarks/serve_bench.py [--participants 100]
+    .venv/bin/python benchmarks/serve_bench.py [--participants 100] [--think-s 1]
 """
 
 from __future__ import annotations
