@@ -222,3 +222,40 @@ def subprocess_export(design: Path, out: Path) -> tuple[pd.DataFrame, pd.DataFra
                    check=True, capture_output=True)
     return tuple(pd.read_csv(path, dtype=str, keep_default_na=False)
                  for path in (out, out.with_name(f"{out.stem}_sessions.csv")))
+
+
+def test_the_static_folder_posts_each_answer_to_post_trial(tmp_path):
+    """Without a server of its own: ``?post_trial=URL`` POSTs each answer (JSON, with the browser) as it is given."""
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed (make setup installs it)")
+    import json
+
+    from playwright.sync_api import sync_playwright
+
+    from stimuli.design import build_design, write_design
+    from stimuli.protocol import parse_protocol
+    from stimuli.survey import export_survey
+    from test_survey_browser import TINY, Server
+
+    design = tmp_path / "design"
+    write_design(build_design(parse_protocol(TINY)), design)
+    make_clips(design, seconds=0.5)
+    export_survey(design, "jspsych", tmp_path / "site")
+    server = Server(tmp_path / "site")
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+            page = browser.new_page()
+            page.goto(f"{server.url}/index.html?participant=3&save=0&simulate=data-only"
+                      f"&post_trial={server.url}/trial")
+            page.wait_for_function("() => window.SHAPEMOTION_STATUS.done && window.SHAPEMOTION_STATUS.saved === 4",
+                                   timeout=30_000)
+            csv = pd.read_csv(io.StringIO(page.evaluate("window.SHAPEMOTION_CSV")), dtype=str, keep_default_na=False)
+            browser.close()
+    finally:
+        server.close()
+    posted = sorted((json.loads(body) for body in server.posted), key=lambda p: int(p["trial"]))  # sent in parallel
+    answered = csv[csv["stimulus_id"] != ""]
+    assert [p["stimulus_id"] for p in posted] == answered["stimulus_id"].tolist()
+    assert [str(p["response"]) for p in posted] == answered["response"].tolist()
+    assert all("Chrome" in p["user_agent"] and p["participant"] == "3" for p in posted)
