@@ -196,3 +196,15 @@ def test_an_overground_capture_is_looped_first_or_refused_with_the_command():
     assert report["looped_input"] and not report["fell"]
     with pytest.raises(StimuliError, match=r"motion import FILE --loop --gait walk --start S --end S"):
         loop_input(raw.slice(0, int(0.8 * raw.fps)))     # under one steady cycle
+
+
+def test_fig7_jog_baselines_say_no_running_norm_is_bundled(tmp_path):
+    from stimuli.physics.analysis_fig7 import plot_fig7
+
+    curve = {k: np.sin(np.linspace(0, 2 * np.pi, 101)) for k in
+             ("root_com_cm", "knee_extension_moment_nm_per_kg", "knee_flexion_deg")}
+    curves = {"F/a": dict(curve, bmi=20.0, sex="F"), "F/b": dict(curve, bmi=30.0, sex="F")}
+    jog = plot_fig7(curves, tmp_path / "jog", gait="jog")[1].read_text()
+    walk = plot_fig7(curves, tmp_path / "walk", gait="walk")[1].read_text()
+    assert "no running norm bundled" in jog and "CGM2.3 normative" not in jog
+    assert "CGM2.3 normative" in walk and "no running norm" not in walk
