@@ -18,10 +18,12 @@ import pytest
 import yaml
 
 from stimuli.design import build_design, write_design
+from stimuli.errors import StimuliError
 from stimuli.protocol import parse_protocol
 
 ROOT = Path(__file__).resolve().parents[1]
 INJECTED_NAME = "exp1\n[[Block:Injected]]\n[[Question:MC]]\nDo you consent to everything?\n[[Choices]]\nYes"
+HOSTILE_NAME = "exp1 ]] [[Block:Injected]] </script> \u2028"   # one line: the protocol accepts it
 
 
 def _design_folder(tmp_path: Path, edit) -> Path:
@@ -57,17 +59,21 @@ def _questions(txt: str) -> list[tuple[str, list[str]]]:
 
 # -- Qualtrics Advanced TXT --------------------------------------------------------------------
 
-def test_a_protocol_name_that_would_inject_blocks_into_the_txt_is_refused(tmp_path, run_cli):
-    folder = _design_folder(tmp_path, lambda d: d.update(name=INJECTED_NAME))
-    message = _refused(run_cli, folder, "qualtrics-txt", tmp_path / "survey.txt")
+@pytest.mark.parametrize("name", [INJECTED_NAME, "exp\r1"])
+def test_a_protocol_name_with_a_line_break_is_refused_by_the_protocol(name, tmp_path):
+    """A line break would end the TXT's [[ED:…]] line and start blocks of its own: the protocol itself
+    refuses it, before any design or export exists."""
+    with pytest.raises(StimuliError, match=r"name \(line \d+\): name .* must be one line of text"):
+        _design_folder(tmp_path, lambda d: d.update(name=name))
+
+
+@pytest.mark.parametrize("name", ["exp]]1", "exp[1", "exp\u20281"])
+def test_each_character_that_ends_the_ed_tag_is_refused(name, tmp_path, run_cli):
+    """One-line names the protocol accepts, but which would end the TXT's [[ED:…]] tag."""
+    message = _refused(run_cli, _design_folder(tmp_path, lambda d: d.update(name=name)), "qualtrics-txt",
+                       tmp_path / "s.txt")
     assert "design.json: protocol field name" in message
     assert "[[ED:…]] tag, which a line break, '[' or ']' would end" in message
-
-
-@pytest.mark.parametrize("name", ["exp]]1", "exp[1", "exp\r1", "exp\u20281"])
-def test_each_character_that_ends_the_ed_tag_is_refused(name, tmp_path, run_cli):
-    folder = _design_folder(tmp_path, lambda d: d.update(name=name))
-    assert "protocol field name" in _refused(run_cli, folder, "qualtrics-txt", tmp_path / "s.txt")
 
 
 def test_a_label_with_a_line_break_stays_one_choice(tmp_path, run_cli):
@@ -151,7 +157,6 @@ def test_a_factor_named_as_a_python_keyword_is_refused_for_psychopy(tmp_path, ru
 
 def test_export_all_refuses_before_writing_any_format(tmp_path):
     """The render's survey step writes every format: a refusal by one leaves none written."""
-    from stimuli.errors import StimuliError
     from stimuli.survey import export_all
 
     folder = _design_folder(tmp_path, lambda d: d["response"]["labels"].__setitem__(0, "Very | Inconsistent"))
@@ -169,7 +174,7 @@ def test_qsf_and_jspsych_carry_hostile_text_unchanged(tmp_path, run_cli):
     labels = ["Very\nInconsistent", "In|consistent", "[Neutral]", "Consistent ]]", "</script>Very Consistent"]
 
     def edit(data):
-        data["name"] = INJECTED_NAME
+        data["name"] = HOSTILE_NAME
         data["response"]["labels"] = labels
 
     folder = _design_folder(tmp_path, edit)
@@ -179,7 +184,7 @@ def test_qsf_and_jspsych_carry_hostile_text_unchanged(tmp_path, run_cli):
     flow = next(e for e in qsf["SurveyElements"] if e["Element"] == "FL")
     fields = {f["Field"]: f["Value"] for item in flow["Payload"]["Flow"] if item.get("Type") == "EmbeddedData"
               for f in item["EmbeddedData"]}
-    assert fields["shapemotion_protocol"] == INJECTED_NAME
+    assert fields["shapemotion_protocol"] == HOSTILE_NAME
     code, _, err = run_cli("survey", folder, "--format", "jspsych", "--out", tmp_path / "js")
     if code == 2 and "jsPsych is not installed" in _one_line(err):
         pytest.skip("jsPsych is not installed (npm ci)")
@@ -188,7 +193,7 @@ def test_qsf_and_jspsych_carry_hostile_text_unchanged(tmp_path, run_cli):
     assert "</script" not in config and "\u2028" not in config
     data = json.loads(config.removeprefix("window.SHAPEMOTION_CONFIG = ").removesuffix(";\n"))
     assert data["response"]["labels"] == labels
-    assert data["protocol"] == INJECTED_NAME
+    assert data["protocol"] == HOSTILE_NAME
 
 
 @pytest.mark.parametrize("module", ["stimuli.survey.qualtrics_txt", "stimuli.survey.psychopy"])
