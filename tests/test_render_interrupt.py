@@ -351,7 +351,7 @@ def test_a_clip_that_does_not_decode_never_gets_its_name(disk_full, tiny_protoco
         assert list((out / "clips").glob("*.mp4")) == [] and _manifest_ids(out) == []
     else:           # otherwise it is that clip's failure, named; the render goes on with the rest
         assert "1 stimulus clip(s) could not be rendered" in message and "1 rendered" in message
-        assert "clips/<clip>.mp4: ffmpeg wrote a clip that does not decode: moov atom not found" in message
+        assert "clips/<clip>.mp4: ffmpeg wrote a clip that does not decode: " in message   # then ffmpeg's words
         assert [p.stem for p in (out / "clips").glob("*.mp4")] == _manifest_ids(out) == ["F-walk-Hi1-Hi2"]
     assert _leftovers(out) == []
 
