@@ -504,6 +504,48 @@ class Recruitment(Strict):
     participant_param: str = Field(default="", max_length=100, pattern=r"^[A-Za-z0-9_]*$")
 
 
+class AttentionChecks(Strict):
+    """Instructed-response checks between the test trials of the jsPsych export: after every ``every``-th
+    test trial a screen asks for one given answer (``prompt``'s ``{answer}`` is replaced by it) and shows
+    the usual answer buttons. The data mark them ``attention_check = 1``; the response import reports the
+    failed checks per participant and excludes every answer of a participant who failed
+    ``exclude_if_failed`` or more (None: report only).
+
+    >>> AttentionChecks(every=16, answer="Neutral").prompt
+    "To show that you are reading this, please select '{answer}'."
+    """
+
+    every: int = Field(ge=1, le=10_000, strict=True)
+    answer: str = Field(min_length=1, max_length=200)
+    prompt: str = Field(default="To show that you are reading this, please select '{answer}'.", max_length=2000)
+    exclude_if_failed: int | None = Field(default=None, ge=1, strict=True)
+
+
+def answer_labels_of(p: "Protocol") -> list[str]:
+    """The buttons of one answer: the Likert labels, or the screen positions' names (:func:`position_labels_of`).
+
+    >>> answer_labels_of(load_protocol("protocols/exp2_com_vs_average.yaml"))
+    ['Left', 'Right']
+    """
+    return list(p.response.labels) if p.response.type == "likert" else position_labels_of(p)
+
+
+def position_labels_of(p: "Protocol") -> list[str]:
+    """What the choices of a forced choice / ranking are called: the display's labels, else Left/Right for
+    two, A, B, … for more; none without an alternatives factor.
+
+    >>> position_labels_of(load_protocol("protocols/thesis_pointlight.yaml"))
+    ['A', 'B', 'C', 'D', 'E', 'F']
+    """
+    alternatives = p.factors_with_role("alternatives")
+    if not alternatives:
+        return []
+    if p.display.labels:
+        return list(p.display.labels)
+    k = len(alternatives[0].levels)
+    return ["Left", "Right"] if k == 2 else [chr(ord("A") + i) for i in range(k)]
+
+
 class Analysis(Strict):
     dependent_measure: Literal["mean_rating", "percent_chosen", "votes", "rank_points"]
     alpha: float = Field(default=0.05, gt=0, lt=1)
@@ -537,6 +579,7 @@ class Protocol(Strict):
     consent: str = ""
     source: str = ""
     recruitment: Recruitment | None = None   # shapemotion serve's platform hand-off; None: none
+    attention_checks: AttentionChecks | None = None   # instructed-response checks (jsPsych export); None: none
 
     @field_validator("name")
     @classmethod
@@ -593,6 +636,8 @@ class Protocol(Strict):
                 del data["analysis"][key]
         if self.recruitment is None:                              # and the serve hand-off
             del data["recruitment"]
+        if self.attention_checks is None:                         # and the attention checks
+            del data["attention_checks"]
         return data
 
 
@@ -635,6 +680,7 @@ def check_consistency(p: Protocol) -> None:
     _check_clip_timing(p)
     _check_practice(p, names)
     _check_screen_mapping(p)
+    _check_attention_answer(p)
     if p.practice.per_block:
         _check_practice_pool(p)
     between_cells = 1
@@ -644,6 +690,19 @@ def check_consistency(p: Protocol) -> None:
         raise ValueError(
             f"participants: {p.participants} participants cannot be balanced over {between_cells} between-subject "
             f"groups; use a multiple of {between_cells}")
+
+
+def _check_attention_answer(p: Protocol) -> None:
+    """The answer an attention check asks for must be one of its buttons (matched as the import matches
+    labels: ignoring case and spacing), or no participant could pass it."""
+    checks = p.attention_checks
+    if checks is None:
+        return
+    labels = answer_labels_of(p)
+    key = " ".join(checks.answer.split()).casefold()
+    if key not in {" ".join(label.split()).casefold() for label in labels}:
+        raise ValueError(f"attention_checks.answer: {shown(checks.answer)} is not one of the answer buttons "
+                         f"{shown(labels)}; ask for one of them")
 
 
 def _check_design_size(p: Protocol) -> None:

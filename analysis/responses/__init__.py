@@ -30,7 +30,8 @@ from analysis.responses.answers import ANSWER, FILE, ROW, TagIndex
 from analysis.responses.qualtrics import qualtrics_answers
 from analysis.responses.read import RawFile, folder_entries, read_response_file, response_files, shown
 from analysis.responses.tidy import assemble
-from analysis.responses.trialwise import trialwise_answers
+from analysis.responses.trialwise import records_and_ids, trialwise_answers
+from analysis.responses.attention import attention_report, exclude_inattentive
 
 __all__ = ["ImportResult", "import_responses", "read_response_file"]
 
@@ -47,6 +48,7 @@ class ImportResult:
     data: pd.DataFrame
     exclusions: pd.DataFrame
     n_rows: int
+    attention: pd.DataFrame | None = None   # jsPsych attention checks per participant (attention.py), if any
 
     @property
     def n_imported_rows(self) -> int:
@@ -90,7 +92,15 @@ class ImportResult:
                 "files_not_read": [{"name": f, "reason": d} for f, d in
                                    self.exclusions.loc[self.exclusions["reason"] == FILE_NOT_READ,
                                                        ["file", "detail"]].itertuples(index=False)]
-                if "file" in self.exclusions else []}
+                if "file" in self.exclusions else []} | self._attention_summary()
+
+    def _attention_summary(self) -> dict:
+        """``attention_checks``: per participant with checks, how many were shown and failed (only when any)."""
+        if self.attention is None or self.attention.empty:
+            return {}
+        return {"attention_checks": [{"participant": str(p), "checks": int(n), "failed": int(f)}
+                                     for p, n, f in self.attention[["participant", "checks", "failed"]]
+                                     .itertuples(index=False)]}
 
 
 def _counts(reasons: pd.Series) -> dict:
@@ -111,17 +121,23 @@ def import_responses(path: str | Path, design: DesignInfo) -> ImportResult:
     raw = read_response_file(path)
     check_protocol(raw, design)
     tags = _tag_index(design)
+    attention = None
     try:   # the readers and checks name row and column; the file is known here
         if raw.format.startswith("qualtrics"):
             answers, exclusions, columns = qualtrics_answers(raw, tags, design.between,
                                                              design.response_type == "ranking")
         else:
             (answers, exclusions), columns = trialwise_answers(raw, design.between, design.within), None
+            if raw.format.startswith("jspsych"):
+                attention = attention_report(*records_and_ids(raw))
+                rule = (design.protocol.get("attention_checks") or {}).get("exclude_if_failed")
+                answers, inattentive = exclude_inattentive(answers, attention, rule)
+                exclusions = exclusions + inattentive
         data, excluded = assemble(answers, exclusions, raw.row_numbers, design,
                                   trialwise=not raw.format.startswith("qualtrics"), stimulus_columns=columns)
     except AnalysisError as exc:
         raise AnalysisError(f"{path}: {exc}") from None
-    return ImportResult(Path(path), raw.format, data, excluded, raw.n_rows)
+    return ImportResult(Path(path), raw.format, data, excluded, raw.n_rows, attention)
 
 
 def protocol_columns(raw: RawFile) -> list[str]:
@@ -180,5 +196,6 @@ def import_folder(folder: Path, design: DesignInfo) -> ImportResult:
                            columns=["row", "participant", "reason", "detail", "column", "scope", "file"])
     exclusions = pd.concat([exclusions, extra, skipped], ignore_index=True).astype({"row": "Int64"})
     formats = "+".join(sorted({r.format for r in results}))
+    checks = [r.attention for r in results if r.attention is not None]
     return ImportResult(folder, formats, data[~later].reset_index(drop=True), exclusions,
-                        sum(r.n_rows for r in results))
+                        sum(r.n_rows for r in results), pd.concat(checks, ignore_index=True) if checks else None)

@@ -49,7 +49,8 @@ LONG_COLUMNS = {"stimulus_id", "response", "button_pressed", "rt", "rt_ms", "rep
 JSPSYCH_COLUMNS = {"trial_type", "trial_index", "time_elapsed", "internal_node_id", "plugin_version",
                    "timeline_variables", "stimulus", "success", "timeout", "failed_images", "failed_audio",
                    "failed_video", "view_history", "question_order", "list", "protocol", "clip_id",
-                   "response_label", "rating", "chosen", "rank_step"}
+                   "response_label", "rating", "chosen", "rank_step",
+                   "attention_check", "attention_answer", "attention_passed"}   # attention checks (attention.py)
 
 
 # Columns that restate a stimulus's row of conditions.csv; checked against it like factor columns.
@@ -62,10 +63,9 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
     Levels of the ``within`` factors that a row states are kept in ``Answer.declared`` so that the
     importer can check them against the stimulus (a contradiction is an error, never ignored).
     """
-    rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
+    rows, pids = records_and_ids(raw)
     pid_col = _participant_column(raw.columns)
     jspsych = raw.format.startswith("jspsych")
-    pids = [cell_text(record.get(pid_col)) if pid_col else raw.path.stem for record in rows]
     wellformed = [raw.format == "jspsych-json" or len(cells) == len(raw.columns) for cells in raw.rows]
     if pid_col is None:
         check_one_participant(rows, pids, wellformed, raw)
@@ -101,6 +101,13 @@ def trialwise_answers(raw: RawFile, between: list[str], within: list[str] = ()):
             continue
         answers.append(_answer(record, number, pid, sid, jspsych, between, within))
     return answers, exclusions + unread_columns(raw, [*between, *within])
+
+
+def records_and_ids(raw: RawFile) -> tuple[list[dict], list[str]]:
+    """Each row as a dict of its columns, and its participant id (the file name without a participant column)."""
+    rows = raw.rows if raw.format == "jspsych-json" else [dict(zip(raw.columns, r)) for r in raw.rows]
+    pid_col = _participant_column(raw.columns)
+    return rows, [cell_text(record.get(pid_col)) if pid_col else raw.path.stem for record in rows]
 
 
 def check_one_participant(rows: list[dict], pids: list[str], wellformed: list[bool], raw: RawFile) -> None:

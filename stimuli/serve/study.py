@@ -68,6 +68,10 @@ def load_study(folder: str | Path) -> Study:
     The clips must be in the folder: the server is the only place they are served from.
     """
     source = load_source(folder)
+    if source.protocol.attention_checks is not None:   # its database holds design trials only
+        raise StimuliError(f"{folder}: the protocol has attention_checks, which shapemotion serve does not store "
+                           f"yet; run the study from the static jsPsych export (shapemotion survey {folder} "
+                           f"--format jspsych, post_trial=URL to collect each answer), or remove attention_checks")
     data = jspsych.config(source)
     lists = {}
     for entry in data.pop("lists"):

@@ -26,7 +26,7 @@ from jinja2 import Environment, FileSystemLoader, select_autoescape
 from stimuli.errors import StimuliError
 from stimuli.survey.source import SurveySource, clip_url
 from stimuli.survey.text import (BLOCK_INTRO, CONSENT_AGREE, CONTINUE, END_TEXT, FAMILIARIZATION_INTRO,
-                                 PRACTICE_INTRO, WATCH_FIRST, answer_labels, consent_html, escape,
+                                 PRACTICE_INTRO, answer_labels, attention_html, consent_html, escape,
                                  instructions_html, question_html)
 
 RUNTIME = Path(__file__).with_name("runtime")
@@ -39,6 +39,8 @@ LIBRARIES = [
     ("jspsych/css/jspsych.css", "jspsych.css"),
 ]
 TEXTS = {"rank_step": "Choice {k}: which clip is the best of those left?", "finish": "Finish",
+         # the hint above each clip says how this page replays it (a click on the clip; it has no controls)
+         "watch": "You can answer once the clip has played to the end; click the clip to watch it again.",
          "saved": "Thank you! Your answers are saved. You may close this page.",
          "loading": "Loading the clips…", "load_error": "The clips could not be loaded. Please tell the experimenter.",
          # shapemotion serve (config.server): saving at the end, and what the participant is told if it fails
@@ -62,21 +64,41 @@ def config(source: SurveySource, post_url: str = "", video_base_url: str | None 
     p = source.protocol
     labels = answer_labels(p)
     texts = {"consent": consent_html(p), "instructions": instructions_html(p), "question": question_html(p),
-             "agree": escape(CONSENT_AGREE), "continue": escape(CONTINUE), "watch": escape(WATCH_FIRST),
+             "agree": escape(CONSENT_AGREE), "continue": escape(CONTINUE),
              "practice_intro": escape(PRACTICE_INTRO), "fam_intro": escape(FAMILIARIZATION_INTRO),
              "block_intro": escape(BLOCK_INTRO), "end": escape(END_TEXT)}
     texts |= {k: escape(v) for k, v in TEXTS.items()}
     used = {t["stimulus_id"] for t in source.trials}
-    return {
+    return _attention(p, labels) | {
         "protocol": p.name,
         "between": source.between,
         "response": {"type": p.response.type, "labels": labels, "labels_html": [escape(x) for x in labels]},
-        "clip": {"width": min(p.clip.width, 1280), "height": p.clip.height},
+        "clip": _shown_size(p.clip.width, p.clip.height),
         "text": texts,
         "clips": {s.stimulus_id: clip_url(video_base_url, s.file) for s in source.stimuli if s.stimulus_id in used},
         "lists": _lists(source),
         "post_url": post_url,
     }
+
+
+def _attention(p, labels: list[str]) -> dict:
+    """``attention``: when and what the checks ask (the answer spelled as its button), or nothing."""
+    checks = p.attention_checks
+    if checks is None:
+        return {}
+    key = " ".join(checks.answer.split()).casefold()
+    answer = next(label for label in labels if " ".join(label.split()).casefold() == key)
+    return {"attention": {"every": checks.every, "answer": answer, "prompt": attention_html(p)}}
+
+
+def _shown_size(width: int, height: int, widest: int = 1280) -> dict:
+    """The clip's size on the page before fitting to the window: at most ``widest`` wide, aspect kept.
+
+    >>> _shown_size(1920, 540)
+    {'width': 1280, 'height': 360}
+    """
+    shown = min(width, widest)
+    return {"width": shown, "height": round(height * shown / width)}
 
 
 def _lists(source: SurveySource) -> list[dict]:

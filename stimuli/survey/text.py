@@ -12,7 +12,7 @@ from __future__ import annotations
 import html
 import re
 
-from stimuli.protocol import Protocol
+from stimuli.protocol import Protocol, answer_labels_of, position_labels_of
 
 # Fixed wording of the screens the protocol does not describe (English; edit after import if needed).
 PRACTICE_INTRO = "Practice: the next clips are examples to get used to the task. They are not part of the results."
@@ -37,22 +37,20 @@ def paragraphs(text: str) -> str:
 
 def position_labels(protocol: Protocol) -> list[str]:
     """What the choices of a forced choice / ranking are called: display labels, else Left/Right."""
-    alternatives = protocol.factors_with_role("alternatives")
-    if not alternatives:
-        return []
-    k = len(alternatives[0].levels)
-    if protocol.display.labels:
-        return list(protocol.display.labels)
-    if k == 2:
-        return ["Left", "Right"]
-    return [chr(ord("A") + i) for i in range(k)]
+    return position_labels_of(protocol)
 
 
 def answer_labels(protocol: Protocol) -> list[str]:
     """The answer options of one question: Likert labels, or the screen positions."""
-    if protocol.response.type == "likert":
-        return list(protocol.response.labels)
-    return position_labels(protocol)
+    return answer_labels_of(protocol)
+
+
+def attention_html(protocol: Protocol) -> str:
+    """An attention check's request: the protocol's prompt with ``{answer}`` filled in, escaped (or ``""``)."""
+    checks = protocol.attention_checks
+    if checks is None:
+        return ""
+    return paragraphs(checks.prompt.replace("{answer}", checks.answer))
 
 
 def video_html(url: str, width: int, height: int, controls: bool = True) -> str:

@@ -22,10 +22,16 @@
  * Each block's clips are preloaded with a progress bar; a clip that fails to load or play is recorded
  * (failed_video in the data; in server mode also an event with the browser) and its answer buttons
  * are enabled so the participant can go on.
+ * With the protocol's attention_checks (config.attention), a check follows every `every`-th test trial
+ * (none after the last): attention_check = 1, attention_answer, response_label, attention_passed.
+ *
+ * Layout: the question is moved above the clip and the clip is scaled to the window (fitVideo) so
+ * that question, clip and answer buttons fit without scrolling, on a laptop as on a large screen.
  */
 (function () {
   "use strict";
   var cfg = window.SHAPEMOTION_CONFIG;
+  var PAGE_MARGIN = 12;   // px kept free above and below the trial (rounding, focus outlines)
   var params = new URLSearchParams(window.location.search);
 
   /** The list (design participant) this run follows. */
@@ -149,10 +155,41 @@
     }, positionsData(trial));
   }
 
+  /** Outer height of an element, margins included (0 when it is not on the page). */
+  function outerHeight(element) {
+    if (!element) { return 0; }
+    var style = window.getComputedStyle(element);
+    return element.getBoundingClientRect().height + parseFloat(style.marginTop) + parseFloat(style.marginBottom);
+  }
+
+  /** Scales the clip to the window: the question above and the answers below stay in view without
+   * scrolling (a 1280×720 clip alone is taller than a 1366×768 laptop's browser window). */
+  function fitVideo() {
+    var video = document.getElementById("jspsych-video-button-response-stimulus");
+    if (!video) { return; }
+    var around = outerHeight(document.getElementById("shapemotion-prompt")) +
+      outerHeight(document.getElementById("jspsych-video-button-response-btngroup"));
+    var room = { width: document.documentElement.clientWidth - 2 * PAGE_MARGIN,
+                 height: window.innerHeight - around - 2 * PAGE_MARGIN };
+    // never below a fifth of the clip: on a tiny window the page scrolls rather than show a stamp
+    var scale = Math.max(0.2, Math.min(1, room.width / cfg.clip.width, room.height / cfg.clip.height));
+    video.style.width = Math.floor(cfg.clip.width * scale) + "px";
+    video.style.height = Math.floor(cfg.clip.height * scale) + "px";
+  }
+  window.addEventListener("resize", fitVideo);
+
+  /** Question above the clip, answers right below it (jsPsych puts the prompt under the buttons). */
+  function layoutTrial(video) {
+    var prompt = document.getElementById("shapemotion-prompt");
+    if (prompt) { video.parentNode.parentNode.insertBefore(prompt, video.parentNode); }
+    fitVideo();
+  }
+
   /** Muted inline playback; a click on the clip replays it once it has ended. */
   function prepareVideo() {
     var video = document.getElementById("jspsych-video-button-response-stimulus");
     if (!video) { return; }
+    layoutTrial(video);
     video.muted = true;
     video.playsInline = true;
     video.setAttribute("playsinline", "");
@@ -199,17 +236,20 @@
         if (onFinish) { onFinish(data); }
       }
     });
-    return Object.assign({
+    var merged = Object.assign({
       type: jsPsychVideoButtonResponse,
       stimulus: [cfg.clips[trial.id]],
       choices: choices,
       prompt: cfg.text.question + "<p class=\"shapemotion-hint\">" + cfg.text.watch + "</p>",
       width: cfg.clip.width,
+      height: cfg.clip.height,
       autoplay: true,
       controls: false,
       response_allowed_while_playing: false,
       on_load: prepareVideo
     }, extra);
+    merged.prompt = "<div id=\"shapemotion-prompt\">" + merged.prompt + "</div>";   // moved above the clip
+    return merged;
   }
 
   function familiarization(trial) {
@@ -263,6 +303,20 @@
     return steps;
   }
 
+  /** An instructed-response check: the request, the usual answer buttons; the data say whether it was met. */
+  function attentionCheck() {
+    var labels = cfg.response.labels;
+    return { type: jsPsychHtmlButtonResponse,
+             stimulus: "<div id=\"shapemotion-prompt\">" + cfg.attention.prompt + "</div>",
+             choices: cfg.response.labels_html,
+             data: { attention_check: 1, attention_answer: cfg.attention.answer },
+             on_finish: function (data) {
+               data.response_label = labels[data.response];
+               data.attention_passed = data.response_label === cfg.attention.answer ? 1 : 0;
+               saveTrial(null, data);
+             } };
+  }
+
   function screen(html, button, extra) {
     return Object.assign({ type: jsPsychHtmlButtonResponse, stimulus: html, choices: [button] }, extra || {});
   }
@@ -285,7 +339,10 @@
     var timeline = resumed ? [screen(cfg.text.instructions, cfg.text.continue)]
       : [screen(cfg.text.consent, cfg.text.agree), screen(cfg.text.instructions, cfg.text.continue)];
     var nBlocks = trials.reduce(function (m, t) { return Math.max(m, t.block); }, 0);
-    var previous = null, loaded = null;
+    var previous = null, loaded = null, tests = 0;
+    var nTests = trials.filter(function (t) { return t.kind === "test"; }).length;
+    // shapemotion serve refuses protocols with attention checks (it stores design trials only)
+    var every = cfg.attention && !server ? cfg.attention.every : 0;
     trials.forEach(function (trial) {
       if (trial.block !== loaded) { timeline.push(preload(trials, trial.block)); loaded = trial.block; }
       var part = trial.block + ":" + trial.kind;
@@ -300,6 +357,10 @@
       if (trial.kind === "familiarization") { timeline.push(familiarization(trial)); }
       else if (cfg.response.type === "ranking") { timeline = timeline.concat(ranking(trial)); }
       else { timeline.push(scored(trial)); }
+      if (trial.kind === "test") {
+        tests += 1;
+        if (every && tests % every === 0 && tests < nTests) { timeline.push(attentionCheck()); }
+      }
     });
     timeline.push(screen("<p>" + cfg.text.end + "</p>", cfg.text.finish, { data: { end: 1 } }));
     return timeline;
