@@ -24,8 +24,8 @@ from tests.test_survey_browser import DONE, TINY, Server, exported, make_clips
 CHECKS = "attention_checks: {every: 2, answer: ' medium', exclude_if_failed: 1}\n"
 
 
-def tiny(extra: str = ""):
-    return parse_protocol(TINY + extra)
+def tiny(extra: str = "", participants: int = 4):
+    return parse_protocol(TINY.replace("participants: 4", f"participants: {participants}") + extra)
 
 
 def test_without_the_block_the_design_files_are_unchanged(tmp_path):
@@ -140,6 +140,21 @@ def test_checks_are_shown_recorded_reported_and_excluded(tmp_path, browser):
     assert result.summary()["excluded_by_reason"]["not a stimulus trial"] > 0
 
 
+def jspsych_rows(design, failing: set[str], rating=lambda t: "1") -> pd.DataFrame:
+    """A jsPsych-shaped file: every design trial answered, then one check per participant (``failing`` fail it)."""
+    trials = pd.read_csv(design / "trials.csv", dtype=str)
+    rows = []
+    for pid, group in trials.groupby("participant"):
+        for t in group.itertuples():
+            rows.append({"participant": pid, "SEX": t.SEX, "stimulus_id": t.stimulus_id, "response": rating(t),
+                         "rt": "900", "repetition": t.repetition, "trial_type": "video-button-response",
+                         "kind": t.kind})
+        rows.append({"participant": pid, "trial_type": "html-button-response", "attention_check": "1",
+                     "attention_answer": "Medium", "response_label": "Light" if pid in failing else "medium ",
+                     "attention_passed": "0", "response": "0"})
+    return pd.DataFrame(rows)
+
+
 def test_report_only_when_no_rule(tmp_path):
     """Without exclude_if_failed the failed checks are reported, and nobody is excluded for them."""
     from analysis.io_design import load_design
@@ -147,18 +162,26 @@ def test_report_only_when_no_rule(tmp_path):
 
     design = tmp_path / "design"
     write_design(build_design(tiny("attention_checks: {every: 2, answer: Medium}\n")), design)
-    trials = pd.read_csv(design / "trials.csv", dtype=str)
-    rows = []
-    for pid, group in trials.groupby("participant"):
-        for t in group.itertuples():
-            rows.append({"participant": pid, "stimulus_id": t.stimulus_id, "response": "2", "rt": "900",
-                         "repetition": t.repetition, "trial_type": "video-button-response", "kind": t.kind})
-        rows.append({"participant": pid, "trial_type": "html-button-response", "attention_check": "1",
-                     "attention_answer": "Medium", "response_label": "Light" if pid == "2" else "medium ",
-                     "attention_passed": "0", "response": "0"})
-    pd.DataFrame(rows).to_csv(tmp_path / "r.csv", index=False)
+    jspsych_rows(design, {"2"}).to_csv(tmp_path / "r.csv", index=False)
     result = import_responses(tmp_path / "r.csv", load_design(design))
     assert result.reconciles and result.data["participant"].nunique() == 4
     # judged from the labels, not from the page's attention_passed (which this file gets wrong on purpose)
     assert [c["failed"] for c in result.summary()["attention_checks"]] == [0, 1, 0, 0]
     assert "failed attention checks" not in result.summary()["excluded_by_reason"]
+
+
+def test_analyze_reports_and_excludes(tmp_path):
+    """``analyze``: summary.json lists the checks per participant; exclusions.csv gives the reason."""
+    from analysis.report import analyze
+
+    design = tmp_path / "design"
+    write_design(build_design(tiny(CHECKS, participants=8)), design)
+    heavier = lambda t: "2" if "Hi1" in t.stimulus_id else str(int(t.repetition) - 1)   # noqa: E731
+    jspsych_rows(design, {"2", "5"}, heavier).to_csv(tmp_path / "r.csv", index=False)
+    summary = analyze(design, tmp_path / "r.csv", tmp_path / "report", models=False)
+    assert [c["failed"] for c in summary["import"]["attention_checks"]] == [0, 1, 0, 0, 1, 0, 0, 0]
+    assert summary["import"]["excluded_by_reason"]["failed attention checks"] == 2 * 4
+    assert summary["import"]["participants"] == 6
+    exclusions = pd.read_csv(tmp_path / "report" / "exclusions.csv", dtype=str)
+    failed = exclusions[exclusions["reason"] == "failed attention checks"]
+    assert set(failed["participant"]) == {"2", "5"}
