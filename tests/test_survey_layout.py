@@ -111,6 +111,10 @@ def test_trial_page_fits_the_window_with_the_question_on_top(tmp_path, browser, 
             assert_fits(boxes, f"{kind} at {width}x{height}")
             if kind == "likert":   # the clip is as large as the window allows: at least 60 % of its height
                 assert boxes["video"]["bottom"] - boxes["video"]["top"] >= min(720, 0.6 * height), boxes
+            if width == 1920:      # a window made smaller during the trial: the clip shrinks with it
+                page.set_viewport_size({"width": 1366, "height": 650})
+                page.wait_for_timeout(200)
+                assert_fits(page.evaluate(BOXES), f"{kind} resized from 1920x1080 to 1366x650")
             context.close()
     finally:
         server.close()
