@@ -76,12 +76,23 @@ MEASURES_OF_RESPONSE = {"likert": ("mean_rating",), "afc": ("percent_chosen", "v
 class Strict(BaseModel):
     """Base model: unknown fields are errors (a typo must not be silently ignored)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # use_attribute_docstrings: the docstring under a field is its description in the JSON Schema
+    # (shapemotion schema) and the generated field reference
+    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
 
 
 # What an actor's capture may be (``motions:`` per gait): read by ``stimuli.motion.captures``.
 CAPTURE_SUFFIXES = (".bvh", ".npz")
 CAPTURE_GAITS = ("walk", "jog", "run")   # stimuli.motion.steady.GAITS: what capture_loop finds
+
+
+# What the JSON Schema (shapemotion schema) allows where a before-validator widens the field: a level
+# may be a YAML number (levels_as_text), a capture its file name alone (Actor._captures).
+LEVEL_SCHEMA = {"type": ["string", "number"]}
+
+
+def _capture_or_file_name(schema: dict) -> None:
+    schema["additionalProperties"] = {"anyOf": [{"type": "string", "minLength": 1}, schema["additionalProperties"]]}
 
 
 class Capture(Strict):
@@ -90,8 +101,11 @@ class Capture(Strict):
     the file name alone or as ``{file: F, start_s: S, end_s: E}``."""
 
     file: str = Field(min_length=1)
+    """the BVH or AMASS .npz capture file; a relative path starts from the protocol's folder"""
     start_s: float | None = Field(default=None, ge=0.0)
+    """start of the range the loop is taken from, in seconds (default: the capture's start)"""
     end_s: float | None = Field(default=None, gt=0.0)
+    """end of that range, in seconds, after start_s (default: the capture's end)"""
 
     @field_validator("file")
     @classmethod
@@ -112,17 +126,28 @@ class Actor(Strict):
     actor's own captures per gait (``{walk: captures/a_walk.bvh}``); a gait without one is generated."""
 
     id: str
+    """unique id of the actor (letters, digits, '_', '-', '.', '+'; at most 40 characters), e.g. F_Hi1"""
     label: str
+    """the short name by which BODY and MOTION levels name the actor (e.g. Hi1); one actor per label and sex"""
     sex: Literal["F", "M"]
+    """F or M: the sex of the fitted body"""
     height_m: float = Field(ge=HEIGHT_RANGE_M[0], le=HEIGHT_RANGE_M[1], description="standing height in metres")
     bmi: float = Field(ge=BMI_RANGE[0], le=BMI_RANGE[1], description="body-mass index in kg/m²")
     group: str | None = None
+    """optional group name (e.g. higher, lower), for the reader"""
     waist_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["waist_m"][0], le=GIRTH_RANGES_M["waist_m"][1])
+    """optional waist girth in metres the fitted body matches"""
     hip_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["hip_m"][0], le=GIRTH_RANGES_M["hip_m"][1])
+    """optional hip girth in metres the fitted body matches"""
     chest_m: float | None = Field(default=None, ge=GIRTH_RANGES_M["chest_m"][0], le=GIRTH_RANGES_M["chest_m"][1])
+    """optional chest girth in metres the fitted body matches"""
     body_fat_pct: float | None = Field(default=None, ge=BODY_FAT_RANGE_PCT[0], le=BODY_FAT_RANGE_PCT[1])
+    """optional body-fat percentage of the actor"""
     practice_only: bool = Field(default=False, strict=True)
-    motions: dict[str, Capture] = {}
+    """true: the actor's body and motion appear in practice trials only, never in the test"""
+    motions: dict[str, Capture] = Field(default={}, json_schema_extra=_capture_or_file_name)
+    """the actor's own captures per gait (walk, jog, run): a file name, or {file, start_s, end_s}; a gait without
+    one is generated"""
 
     @field_validator("motions", mode="before")
     @classmethod
@@ -149,11 +174,21 @@ class Factor(Strict):
     """An independent variable: its levels, who varies it (between/within) and what it shows."""
 
     name: str
+    """factor name: a letter, then letters, digits or '_'; not a column of the design files (block, trial, …)"""
     role: Literal["between", "within", "alternatives"]
-    levels: list[str] = Field(min_length=2)
+    """between (each participant sees one level), within (every participant sees every level) or alternatives (the
+    levels shown side by side and chosen between, e.g. METHOD)"""
+    levels: list[str] = Field(min_length=2, json_schema_extra={"items": LEVEL_SCHEMA})
+    """the levels (at least 2, none repeated; letters, digits, '_', '-', '.', '+'); body and motion levels are
+    actor labels"""
     maps_to: MapsTo = "none"
+    """what a level means on screen: sex, gait, body or motion (actor labels), method, strength, parameter, source,
+    view, or none"""
     abbreviations: dict[str, str] = {}
+    """per level, the text tables and figures show (e.g. Hi1: H1b); none blank, repeated or another level's name"""
     level_settings: dict[str, dict[str, float | str]] = {}
+    """per level, settings the renderer reads: view_deg (any factor), modifies (parameter), motion (source or
+    method), base_scale (source)"""
 
     @field_validator("levels", mode="before")
     @classmethod
@@ -307,15 +342,24 @@ def _check_strength_levels(factor: "Factor") -> None:
 
 
 class GaitSpec(Strict):
+    """Cadence and belt speed of one gait: every actor walks (or jogs) at these."""
+
     cadence_spm: float = Field(ge=CADENCE_RANGE_SPM[0], le=CADENCE_RANGE_SPM[1], description="steps per minute")
     speed_mps: float = Field(ge=SPEED_RANGE_MPS[0], le=SPEED_RANGE_MPS[1], description="belt speed in m/s")
 
 
 class Camera(Strict):
+    """Where the camera stands, relative to the body."""
+
     azimuth_deg: float = 30.0
+    """horizontal angle of the camera around the body, in degrees"""
     elevation_deg: float = 10.0
+    """height of the camera as an angle above the horizon, in degrees"""
     distance_m: float = Field(default=4.0, gt=0.5, le=50)
+    """camera distance in metres (on a floor layout a framing rule sets it so that treadmill and body fill the
+    frame)"""
     fov_deg: float = Field(default=40.0, gt=5, lt=150)
+    """field of view in degrees"""
 
 
 class ClipSettings(Strict):
@@ -324,14 +368,23 @@ class ClipSettings(Strict):
     are even because H.264 in yuv420p halves them for the colour planes."""
 
     duration_s: float = Field(gt=0, le=120)
+    """clip length in seconds (at most 120)"""
     # strict: YAML's true, "2" or 0 are not a number of cycles, a frame rate or a yes/no
     cycles: int = Field(default=1, ge=1, strict=True)
+    """the fewest whole gait cycles every gait must show (default 1)"""
     fps: int = Field(default=30, ge=CLIP_FPS_RANGE[0], le=CLIP_FPS_RANGE[1], strict=True)
+    """frames per second (5–240)"""
     width: int = Field(default=1280, ge=CLIP_WIDTH_RANGE[0], le=CLIP_WIDTH_RANGE[1], strict=True)
+    """clip width in pixels, even (64–7680)"""
     height: int = Field(default=720, ge=CLIP_HEIGHT_RANGE[0], le=CLIP_HEIGHT_RANGE[1], strict=True)
+    """clip height in pixels, even (64–4320)"""
     camera: Camera = Camera()
+    """where the camera stands"""
     background: str = "#ffffff"
+    """background colour, #rrggbb"""
     loop: bool = Field(default=True, strict=True)
+    """true: the clip shows whole gait cycles and loops cleanly (cadence rounded to fit); false: the protocol's
+    cadence, cut at duration_s"""
 
     @field_validator("width", "height")
     @classmethod
@@ -353,7 +406,10 @@ class Display(Strict):
     """How a stimulus is shown. ``alternatives`` clips put the levels of one factor side by side."""
 
     layout: Literal["treadmill", "side_by_side", "point_light", "row"]
+    """treadmill (one character), side_by_side (two clips), point_light (15 dots on the background) or row (several
+    clips)"""
     labels: list[str] | None = None
+    """names of the screen positions (e.g. A–F); none blank or repeated"""
     body: str | None = Field(default=None, description="actor id whose body is shown when no factor maps to body")
     # The renderer draws the 15 markers of SPEC §1.3 (the thesis's set); other counts were accepted and ignored.
     point_light_markers: int | None = Field(default=None, strict=True, description="15: the only marker set drawn")
@@ -405,7 +461,11 @@ class Alternatives(Strict):
     """
 
     arrangements: Literal["all", "latin_square", "fixed"] = "all"
+    """screen orders of the alternatives: all (every permutation), latin_square (k orders, each level once in each
+    position) or fixed (the declared order)"""
     counterbalance: Literal["within", "between"] = "within"
+    """within (every participant sees every arrangement) or between (one arrangement per condition, rotated over
+    participants)"""
 
 
 class Blocks(Strict):
@@ -424,16 +484,26 @@ class Blocks(Strict):
     """
 
     by: list[str] = []
+    """the within factors that define blocks"""
     order: Literal["counterbalanced", "latin_square", "random", "fixed"] = "counterbalanced"
+    """block order over participants: counterbalanced (alias latin_square: Williams Latin square rows dealt
+    evenly), random or fixed"""
     trials: Literal["random", "fixed"] = "random"
+    """test order inside a block: random (per participant, never a clip twice in a row) or fixed (the declared
+    order of the levels)"""
     nested: bool = Field(default=False, strict=True)   # strict: 1 or a quoted "true" is refused
+    """true: the first 'by' factor makes main blocks, the others sub-blocks inside each (needs two or more 'by'
+    factors)"""
 
 
 class Practice(Strict):
     """Practice trials before each block, built from practice-only levels (not used in the test)."""
 
     per_block: int = Field(default=0, ge=0, strict=True)
-    levels: dict[str, list[str]] = {}
+    """practice trials before each block (0: none)"""
+    levels: dict[str, list[str]] = Field(default={}, json_schema_extra={
+        "additionalProperties": {"type": "array", "items": LEVEL_SCHEMA}})
+    """practice-only levels per within factor that does not define blocks (not test levels)"""
 
     @field_validator("levels", mode="before")
     @classmethod
@@ -445,14 +515,23 @@ class Familiarization(Strict):
     """Before each block, the block's bodies shown one by one (e.g. in increasing BMI order)."""
 
     enabled: bool = Field(default=False, strict=True)
+    """true: before each block, show the block's bodies one by one"""
     order: Literal["bmi_ascending", "bmi_descending", "declared"] = "bmi_ascending"
+    """order of the bodies shown: bmi_ascending, bmi_descending or declared"""
 
 
 class Response(Strict):
+    """What the participant answers after each clip."""
+
     type: Literal["likert", "afc", "ranking"]
+    """likert (a rating scale), afc (a forced choice among the alternatives) or ranking (of the alternatives)"""
     question: str
+    """the question shown with every clip"""
     labels: list[str] = []
+    """the Likert scale's labels (2 or more), or names for the choices; none blank or repeated (answers are matched
+    to labels ignoring case and spacing)"""
     instructions: str = ""
+    """text shown before the trials"""
 
     @model_validator(mode="after")
     def _labels(self) -> "Response":
@@ -487,7 +566,10 @@ def check_distinct_labels(labels: list[str], field: str, who: str) -> None:
 
 
 class Assignment(Strict):
+    """How participants are assigned to between groups and block orders."""
+
     method: Literal["balanced"] = "balanced"
+    """balanced: participants are dealt evenly over the between groups and block orders"""
 
 
 class Recruitment(Strict):
@@ -499,9 +581,14 @@ class Recruitment(Strict):
     """
 
     platform: Literal["prolific", "other"] = "prolific"
+    """prolific or other"""
     completion_code: str = Field(default="", max_length=200, pattern=r"^[A-Za-z0-9_-]*$")
+    """the code a finished participant is given (letters, digits, '_', '-')"""
     completion_url: str = Field(default="", max_length=2000, pattern=r"^(https?://\S*)?$")
+    """where a finished participant is sent; may hold {code} (for Prolific, Prolific's completion address by
+    default)"""
     participant_param: str = Field(default="", max_length=100, pattern=r"^[A-Za-z0-9_]*$")
+    """the URL parameter carrying the platform's participant id (Prolific: PROLIFIC_PID)"""
 
 
 class AttentionChecks(Strict):
@@ -516,9 +603,13 @@ class AttentionChecks(Strict):
     """
 
     every: int = Field(ge=1, le=10_000, strict=True)
+    """a check after every N-th test trial"""
     answer: str = Field(min_length=1, max_length=200)
+    """the answer the check asks for: one of the answer buttons"""
     prompt: str = Field(default="To show that you are reading this, please select '{answer}'.", max_length=2000)
+    """the check's text; {answer} is replaced by the answer"""
     exclude_if_failed: int | None = Field(default=None, ge=1, strict=True)
+    """exclude every answer of a participant who failed this many checks or more (null: report only)"""
 
 
 def answer_labels_of(p: "Protocol") -> list[str]:
@@ -547,39 +638,70 @@ def position_labels_of(p: "Protocol") -> list[str]:
 
 
 class Analysis(Strict):
+    """The analysis of the answers: the dependent measure, alpha and the post-hoc tests."""
+
     dependent_measure: Literal["mean_rating", "percent_chosen", "votes", "rank_points"]
+    """mean_rating (likert), percent_chosen or votes (afc), rank_points (ranking)"""
     alpha: float = Field(default=0.05, gt=0, lt=1)
+    """significance level of the tests (0–1)"""
     posthoc: Literal["tukey", "none"] = "tukey"
+    """pairwise comparisons of the significant effects: tukey or none"""
     # how the post-hoc pairs are tested (analysis.posthoc; None = its defaults: univariate, tukey, emmeans means)
     followup: Literal["univariate", "multivariate", "statistica"] | None = None
+    """how post-hoc pairs are tested: univariate (default), multivariate or statistica (the paper's convention:
+    each effect's own error term)"""
     adjust: Literal["tukey", "holm", "bonferroni", "none"] | None = None
+    """p adjustment over each effect's pairs: tukey (default), holm, bonferroni or none"""
     means: Literal["emmeans", "observed"] | None = None
+    """marginal means: emmeans (equal weights over groups; default) or observed (n-weighted)"""
 
 
 class Protocol(Strict):
     """A whole experiment. See ``protocols/*.yaml`` for annotated examples."""
 
     name: str
+    """the experiment's name: one line without control characters (written into survey syntax and matched by the
+    response import)"""
     title: str = ""
+    """a human-readable title"""
     seed: int = Field(ge=0, strict=True)
+    """seed of every random choice (a whole number ≥ 0): the same seed gives the same design"""
     participants: int = Field(ge=1, le=100_000, strict=True)
+    """number of participants; a multiple of the number of between groups"""
     actors: list[Actor] = []
+    """the people whose bodies and motions the stimuli show"""
     factors: list[Factor] = Field(min_length=1)
+    """the independent variables (at least one)"""
     gaits: dict[str, GaitSpec] = {}
+    """cadence and belt speed per gait (walk, jog, run)"""
     display: Display
+    """how a stimulus is shown"""
     alternatives: Alternatives = Alternatives()
+    """counterbalancing of the alternatives' screen positions"""
     clip: ClipSettings
+    """length and look of every clip"""
     blocks: Blocks = Blocks()
+    """blocks and the order of blocks and trials"""
     repetitions: int = Field(default=1, ge=1, le=20, strict=True)
+    """times each test clip is shown in its block (1–20)"""
     practice: Practice = Practice()
+    """practice trials before each block"""
     familiarization: Familiarization = Familiarization()
+    """the bodies shown one by one before each block"""
     response: Response
+    """what the participant answers"""
     assignment: Assignment = Assignment()
+    """how participants are assigned to groups and orders"""
     analysis: Analysis
+    """the analysis of the answers"""
     consent: str = ""
+    """consent text shown before the study"""
     source: str = ""
+    """where the design comes from (paper, section, table)"""
     recruitment: Recruitment | None = None   # shapemotion serve's platform hand-off; None: none
+    """optional: hand-off to a recruitment platform (shapemotion serve)"""
     attention_checks: AttentionChecks | None = None   # instructed-response checks (jsPsych export); None: none
+    """optional: instructed-response checks between test trials (jsPsych export)"""
 
     @field_validator("name")
     @classmethod

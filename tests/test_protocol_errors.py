@@ -26,12 +26,12 @@ def replace(text: str, old: str, new: str) -> str:
 
 
 CASES = {
-    "misspelt top-level field": (replace(EXP1, "participants: 16", "partcipants: 16"), ["partcipants", "unknown field", "line 8"]),
+    "misspelt top-level field": (replace(EXP1, "participants: 16", "partcipants: 16"), ["partcipants", "unknown field", "line 9"]),
     "YAML syntax error": (replace(EXP1, "levels: [F, M]", "levels: [F, M"), ["YAML syntax error", "line"]),
-    "BMI out of human range": (replace(EXP1, "bmi: 28.1", "bmi: 281"), ["actors.0.bmi", "line 13", "less than or equal to 60"]),
-    "height out of human range": (replace(EXP1, "height_m: 1.64", "height_m: 16.4"), ["actors.1.height_m", "line 14"]),
+    "BMI out of human range": (replace(EXP1, "bmi: 28.1", "bmi: 281"), ["actors.0.bmi", "line 14", "less than or equal to 60"]),
+    "height out of human range": (replace(EXP1, "height_m: 1.64", "height_m: 16.4"), ["actors.1.height_m", "line 15"]),
     "mis-typed number": (replace(EXP1, "repetitions: 2 ", "repetitions: twice "), ["repetitions", "valid integer", "'twice'"]),
-    "unbalanced between groups": (replace(EXP1, "participants: 16", "participants: 15"), ["participants", "cannot be balanced", "multiple of 2", "line 8"]),
+    "unbalanced between groups": (replace(EXP1, "participants: 16", "participants: 15"), ["participants", "cannot be balanced", "multiple of 2", "line 9"]),
     "block factor not declared": (replace(EXP1, "by: [GAIT]", "by: [GAITS]"), ["blocks.by", "unknown factor 'GAITS'"]),
     "level names no actor": (replace(EXP1, "{id: F_Lo2, label: Lo2,", "{id: F_Lo2, label: Lo9,"),
                              ["factors.BODY", "'Lo2'", "names no actor", "sex F"]),
@@ -55,32 +55,32 @@ CASES = {
     "alternatives the renderer makes no motion for": (
         edited(EXP2, lambda d: d["factors"][3].update(maps_to="gait", level_settings={})),
         ["factors.3.maps_to", "METHOD is an alternatives factor", "method, strength, source only", "'gait'"]),
-    "odd clip width": (replace(EXP1, "width: 1280", "width: 321"), ["clip.width", "line 59", "even", "320 or 322"]),
-    "odd clip height": (replace(EXP1, "height: 720", "height: 181"), ["clip.height", "line 60", "even", "180 or 182"]),
+    "odd clip width": (replace(EXP1, "width: 1280", "width: 321"), ["clip.width", "line 60", "even", "320 or 322"]),
+    "odd clip height": (replace(EXP1, "height: 720", "height: 181"), ["clip.height", "line 61", "even", "180 or 182"]),
     "measure that does not fit the response": (
         replace(EXP1, "dependent_measure: mean_rating", "dependent_measure: percent_chosen"),
-        ["analysis.dependent_measure", "line 88", "percent_chosen does not fit response.type likert", "mean_rating"]),
+        ["analysis.dependent_measure", "line 89", "percent_chosen does not fit response.type likert", "mean_rating"]),
     "forced choice analysed as ratings": (
         replace(EXP2, "dependent_measure: percent_chosen", "dependent_measure: mean_rating"),
         ["analysis.dependent_measure", "response.type afc", "percent_chosen or votes"]),
     "clip shorter than one gait cycle": (
         replace(EXP1, "duration_s: 4 ", "duration_s: 0.1 "),
-        ["clip.duration_s", "line 56", "shorter than one gait cycle of walk (112 steps/min: 1.07 s",
+        ["clip.duration_s", "line 57", "shorter than one gait cycle of walk (112 steps/min: 1.07 s",
          "duration_s >= 1.07 s"]),
     "fewer gait cycles than clip.cycles": (
         replace(EXP1, "cycles: 2", "cycles: 5"),
-        ["clip.cycles", "line 57", "at least 5 whole cycles", "walk (112 steps/min) 4", "duration_s >= 5.36 s"]),
+        ["clip.cycles", "line 58", "at least 5 whole cycles", "walk (112 steps/min) 4", "duration_s >= 5.36 s"]),
     "one practice clip repeated back to back": (
         replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: [P1], MOTION: [P1]}"),
-        ["practice.per_block", "line 70", "4 practice trials per block", "only 1 distinct practice clip",
+        ["practice.per_block", "line 71", "4 practice trials per block", "only 1 distinct practice clip",
          "BODY: P1, MOTION: P1"]),
     "practice levels for the block factor": (
         replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {GAIT: [run]}"),
-        ["practice.levels.GAIT", "line 71", "GAIT defines the blocks", "within factors that do not define blocks"]),
+        ["practice.levels.GAIT", "line 72", "GAIT defines the blocks", "within factors that do not define blocks"]),
     # Bad-input audit: practice levels are checked whatever per_block is, and never crash.
     "practice levels for the between factor": (
         replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {SEX: [X], BODY: [P1, P2]}"),
-        ["practice.levels.SEX", "line 71", "SEX is a between factor", "within factors that do not define blocks"]),
+        ["practice.levels.SEX", "line 72", "SEX is a between factor", "within factors that do not define blocks"]),
     "practice levels for the between factor, per_block 0": (
         replace(replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {SEX: [X]}"),
                 "per_block: 4 ", "per_block: 0 "),
@@ -98,13 +98,13 @@ CASES = {
         ["practice.levels.METHOD", "METHOD is an alternatives factor"]),
     "repeated practice levels": (
         replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: [P1, P1], MOTION: [P1, P2]}"),
-        ["practice.levels.BODY", "line 71", "levels repeat: ['P1']"]),
+        ["practice.levels.BODY", "line 72", "levels repeat: ['P1']"]),
     "empty practice level list": (
         replace(EXP1, "levels: {BODY: [P1, P2], MOTION: [P1, P2]}", "levels: {BODY: []}"),
-        ["practice.levels.BODY", "line 71", "the list is empty"]),
+        ["practice.levels.BODY", "line 72", "the list is empty"]),
     "two METHOD levels set to the same motion": (
         replace(EXP2, "COM: {motion: physics}", "COM: {motion: average}"),
-        ["factors.3.level_settings.COM.motion", "line 48", "'NoCOM' and 'COM' both show the average motion"]),
+        ["factors.3.level_settings.COM.motion", "line 49", "'NoCOM' and 'COM' both show the average motion"]),
     "two METHOD levels without settings, named alike by the fallback": (
         edited(EXP2, lambda d: d["factors"][3].update(levels=["A", "B"], abbreviations={}, level_settings={})),
         ["factors.3.levels", "'A' and 'B' both show the physics motion", "NoCOM = average"]),
@@ -113,14 +113,14 @@ CASES = {
                 "keyframed: {motion: generator}", "keyframed: {motion: lean_walk}"),
         ["level_settings.keyframed.motion", "'lean_mocap' and 'keyframed' both show the lean_walk motion"]),
     "clip.cycles given as true": (replace(EXP1, "cycles: 2", "cycles: true"),
-                                  ["clip.cycles", "line 57", "valid integer", "(got True)", "without quotes"]),
-    "clip.cycles given as text": (replace(EXP1, "cycles: 2", 'cycles: "2"'), ["clip.cycles", "line 57", "(got '2')"]),
+                                  ["clip.cycles", "line 58", "valid integer", "(got True)", "without quotes"]),
+    "clip.cycles given as text": (replace(EXP1, "cycles: 2", 'cycles: "2"'), ["clip.cycles", "line 58", "(got '2')"]),
     "clip.loop given as a number": (replace(EXP1, "cycles: 2", "cycles: 2\n  loop: 0"),
-                                    ["clip.loop", "line 58", "valid boolean", "(got 0)", "true or false"]),
+                                    ["clip.loop", "line 59", "valid boolean", "(got 0)", "true or false"]),
     "clip.loop given as text": (replace(EXP1, "cycles: 2", 'cycles: 2\n  loop: "false"'),
                                 ["clip.loop", "valid boolean", "(got 'false')"]),
     "unknown clip field": (replace(EXP1, "cycles: 2", "cyclez: 2"),
-                           ["clip.cyclez", "line 57", "unknown field", "duration_s, cycles, fps, width, height"]),
+                           ["clip.cyclez", "line 58", "unknown field", "duration_s, cycles, fps, width, height"]),
 }
 
 
@@ -179,5 +179,5 @@ def test_unlooped_clip_too_short_for_one_cycle_suggests_no_impossible_fix(tmp_pa
     code, _, stderr = run_cli("validate", path)
     message = " ".join(stderr.split())
     assert code == 2 and "Traceback" not in stderr
-    assert "clip.duration_s (line 56)" in message and "duration_s >= 1.07 s" in message
+    assert "clip.duration_s (line 57)" in message and "duration_s >= 1.07 s" in message
     assert "lower clip.cycles" not in message

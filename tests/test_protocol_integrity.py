@@ -45,7 +45,7 @@ def refused(run_cli, tmp_path, text: str, command: str = "design") -> str:
 LABEL_CASES = {
     "repeated Likert labels": (
         replace(EXP1, LIKERT, "[Disagree, Disagree, Neutral, Agree, Agree]"),
-        ["response.labels.1 (line 76)", "label 2 'Disagree' repeats label 1", "ignoring case and spacing"]),
+        ["response.labels.1 (line 77)", "label 2 'Disagree' repeats label 1", "ignoring case and spacing"]),
     "five equal labels": (
         replace(EXP1, LIKERT, "[Same, Same, Same, Same, Same]"),
         ["response.labels.1", "label 2 'Same' repeats label 1 ('Same')"]),
@@ -54,7 +54,7 @@ LABEL_CASES = {
         ["response.labels.3", "label 4 'Agree' repeats label 3 ('agree ')"]),
     "an empty label": (
         replace(EXP1, LIKERT, '[Disagree, "", Agree]'),
-        ["response.labels.1 (line 76)", "label 2 is blank", "every point of the scale needs a label"]),
+        ["response.labels.1 (line 77)", "label 2 is blank", "every point of the scale needs a label"]),
     "a label of spaces": (
         replace(EXP1, LIKERT, '[Disagree, Neutral, "  ", Agree]'),
         ["response.labels.2", "label 3 is blank"]),
@@ -63,7 +63,7 @@ LABEL_CASES = {
         ["display.labels.2", "label 3 'b' repeats label 2 ('B')"]),
     "repeated abbreviations": (
         replace(EXP1, "{walk: W, jog: J}", "{walk: W, jog: W}"),
-        ["factors.1.abbreviations (line 35)", "GAIT levels 'walk' and 'jog' are both shown as 'W'"]),
+        ["factors.1.abbreviations (line 36)", "GAIT levels 'walk' and 'jog' are both shown as 'W'"]),
     "an abbreviation that another level shows unabbreviated": (
         replace(EXP1, "{walk: W, jog: J}", "{walk: jog}"),
         ["factors.1.abbreviations", "'walk' is abbreviated 'jog', the name of another GAIT level"]),
@@ -140,7 +140,7 @@ def test_alias_bomb_is_refused_fast(field, tmp_path, run_cli):
 
 def test_recursive_alias_is_refused(tmp_path, run_cli):
     message = refused(run_cli, tmp_path, replace(EXP1, "title: Shape", "title: &me [*me]\nx: Shape"), "validate")
-    assert "line 5" in message and "refers to itself" in message
+    assert "line 6" in message and "refers to itself" in message
 
 
 def test_anchors_within_the_limits_still_load():
@@ -158,7 +158,7 @@ def test_anchors_within_the_limits_still_load():
 def test_deep_nesting_is_refused_not_a_recursion_error(tmp_path, run_cli):
     message = refused(run_cli, tmp_path, replace(EXP1, "title: Shape", "title: " + "[" * 5000 + "]" * 5000 + "\nx: Shape"),
                       "validate")
-    assert "nested deeper than" in message and "line 5" in message
+    assert "nested deeper than" in message and "line 6" in message
 
 
 def test_file_over_the_size_limit_is_refused_before_reading(tmp_path, run_cli):
@@ -181,13 +181,13 @@ LONG = "x" * 1_000_000   # under the size limit: the loader reads it and the mes
 
 LONG_VALUE_CASES = {
     "a 1 MB string in an integer field": (replace(EXP1, "seed: 2023", f"seed: {LONG}"),
-                                          ["seed (line 7)", "(got 1,000,000 characters)"]),
+                                          ["seed (line 8)", "(got 1,000,000 characters)"]),
     "a 1 MB actor label": (replace(EXP1, "label: Hi1, sex: F", f"label: {LONG}, sex: F"),
                            ["actors.0.label", "1,000,000 characters"]),
     "a 1 MB level": (replace(EXP1, "levels: [walk, jog]", f"levels: [walk, {LONG}]"), ["factors.1", "1,000,000 characters"]),
     # '? key' is YAML's explicit key: a plain key of over 1,024 characters is a syntax error
     "a 1 MB key": (replace(EXP1, "seed: 2023", f"? {LONG}\n: 1\nseed: 2023"),
-                   ["<a key of 1,000,000 characters> (line 7): unknown field"]),
+                   ["<a key of 1,000,000 characters> (line 8): unknown field"]),
     "a 1 MB repeated key": (replace(EXP1, "seed: 2023", f"? {LONG[:500_000]}\n: 1\n? {LONG[:500_000]}\n: 1\nseed: 2023"),
                             ["appears twice", "500,000 characters"]),
 }
@@ -227,7 +227,7 @@ def test_bad_scalar_constructions_are_yaml_errors(tmp_path, run_cli):
     for value in ("!!timestamp 2001-13-45", "1" * 5_000):
         message = refused(run_cli, tmp_path, replace(EXP1, "title: Shape and motion consistency (Experiment 1)",
                                                      f"title: {value}"), "validate")
-        assert "line 5" in message and "cannot read the value" in message and len(message) < 400
+        assert "line 6" in message and "cannot read the value" in message and len(message) < 400
 
 
 # -- item 5: actors a level cannot tell apart ------------------------------------------------------
@@ -235,14 +235,14 @@ def test_bad_scalar_constructions_are_yaml_errors(tmp_path, run_cli):
 def test_two_actors_of_one_sex_sharing_a_label(tmp_path, run_cli):
     text = replace(EXP1, "  - {id: F_P1,", "  - {id: F_Hi1b, label: Hi1, sex: F, height_m: 1.60, bmi: 28.1}\n  - {id: F_P1,")
     message = refused(run_cli, tmp_path, text)
-    assert "actors.8.label (line 21)" in message
+    assert "actors.8.label (line 22)" in message
     assert "F_Hi1 and F_Hi1b are both sex F with label 'Hi1'" in message
 
 
 def test_actors_sharing_a_label_without_a_sex_factor(tmp_path, run_cli):
     """Without a factor mapped to sex a label alone names the actor: an F and an M actor may not share it."""
     message = refused(run_cli, tmp_path, replace(EXP1, "maps_to: sex", "maps_to: none"), "validate")
-    assert "actors.4.label (line 17)" in message
+    assert "actors.4.label (line 18)" in message
     assert "F_Hi1 and M_Hi1 share label 'Hi1' and no factor maps to sex" in message
 
 
@@ -265,12 +265,12 @@ def test_levels_that_make_one_stimulus_id(tmp_path, run_cli):
 
 def test_factor_named_in_a_message_points_at_its_own_line(tmp_path, run_cli):
     message = refused(run_cli, tmp_path, replace(EXP1, "{id: F_Lo2, label: Lo2,", "{id: F_Lo2, label: Lo9,"))
-    assert "factors.BODY (line 36)" in message
+    assert "factors.BODY (line 37)" in message
 
 
 def test_nested_field_named_in_a_message_gets_its_line(tmp_path, run_cli):
     message = refused(run_cli, tmp_path, replace(EXP2, "NoCOM: {motion: average}", "NoCOM: {view_deg: 999}"))
-    assert "factors.3.level_settings.NoCOM.view_deg (line 47)" in message
+    assert "factors.3.level_settings.NoCOM.view_deg (line 48)" in message
 
 
 @pytest.mark.parametrize("command", [("design", "protocols/exp1_shape_motion.yaml"), ("demo", "--quick")])
@@ -296,14 +296,14 @@ def test_too_many_nodes_are_refused_early():
     with pytest.raises(StimuliError, match=f"more than {MAX_NODES:,} values") as info:
         parse_protocol(text, source="big.yaml")
     assert time.perf_counter() - start < 3.0
-    assert "big.yaml: line 33" in str(info.value)
+    assert "big.yaml: line 34" in str(info.value)
 
 
 def test_control_character_is_a_message_with_its_line(tmp_path, run_cli):
     """PyYAML's reader refuses control characters before any line is known (the fuzz suite found a
     traceback here): the message counts the line itself."""
     message = refused(run_cli, tmp_path, replace(EXP1, "seed: 2023", "seed: 20\x1f23"), "validate")
-    assert "line 7, column 9" in message and "#x001f is not allowed" in message
+    assert "line 8, column 9" in message and "#x001f is not allowed" in message
 
 
 @pytest.mark.parametrize("args", [["bodies", "--protocol", "protocols/exp1_shape_motion.yaml"],
@@ -321,12 +321,12 @@ def test_empty_out_is_refused_by_other_commands(args, capsys):
 
 
 LEVEL_TYPE_CASES = {
-    "practice levels given as a number": ("levels: {BODY: 5, MOTION: [P1, P2]}", "practice.levels.BODY (line 71)",
+    "practice levels given as a number": ("levels: {BODY: 5, MOTION: [P1, P2]}", "practice.levels.BODY (line 72)",
                                           "valid list (got 5)"),
-    "practice levels given as one word": ("levels: {BODY: P1, MOTION: [P1, P2]}", "practice.levels.BODY (line 71)",
+    "practice levels given as one word": ("levels: {BODY: P1, MOTION: [P1, P2]}", "practice.levels.BODY (line 72)",
                                           "valid list (got 'P1')"),
     "practice levels left empty": ("levels: {BODY: , MOTION: [P1, P2]}", "practice.levels.BODY", "(got None)"),
-    "a level YAML reads as true": ("levels: {BODY: [P1, on], MOTION: [P1, P2]}", "practice.levels (line 71)",
+    "a level YAML reads as true": ("levels: {BODY: [P1, on], MOTION: [P1, P2]}", "practice.levels (line 72)",
                                    "level True: YAML reads yes, no, on, off, true and false as true or false"),
 }
 
@@ -350,7 +350,7 @@ def test_numbers_still_name_levels():
 def test_factor_named_like_a_design_column_is_refused(name, tmp_path, run_cli):
     """A between factor called ``block`` had its F/M column overwritten by block numbers in trials.csv."""
     message = refused(run_cli, tmp_path, replace(EXP1, "name: SEX", f"name: {name}"))
-    assert f"factors.0.name (line 27): factor name '{name}' is a column of the design or answer files" in message
+    assert f"factors.0.name (line 28): factor name '{name}' is a column of the design or answer files" in message
 
 
 def test_alternatives_with_every_order_that_no_design_could_hold(tmp_path, run_cli):
@@ -369,7 +369,7 @@ def test_alternatives_with_every_order_that_no_design_could_hold(tmp_path, run_c
 
 def test_participants_beyond_the_trial_limit(tmp_path, run_cli):
     message = refused(run_cli, tmp_path, replace(EXP1, "participants: 16 ", "participants: 20000 "), "validate")
-    assert "participants (line 8): 20,000 participants × 64 test trials each make 1,280,000 rows" in message
+    assert "participants (line 9): 20,000 participants × 64 test trials each make 1,280,000 rows" in message
     out = tmp_path / "out"
     code, _, stderr = run_cli("design", PROTOCOLS / "exp1_shape_motion.yaml", "--participants", "1000000", "--out", out)
     assert code == 2 and "--participants: 1,000,000 participants × 64 test trials" in " ".join(stderr.split())
