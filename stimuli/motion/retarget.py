@@ -20,7 +20,10 @@ Twist bones, toes and fingers keep their rest orientation relative to their pare
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.motion import quat
@@ -106,6 +109,47 @@ def standing_pelvis_height(source: Motion, roles: dict[str, int]) -> float:
     return leg_length(source) + float(np.median(pos[:, roles["pelvis"], 1] - hips))
 
 
+def _axis_frame(lateral: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) whose columns are the body's left, up and forward axes."""
+    x = lateral / np.linalg.norm(lateral, axis=-1, keepdims=True)
+    y = up - x * np.sum(up * x, axis=-1, keepdims=True)
+    y = y / np.linalg.norm(y, axis=-1, keepdims=True)
+    return np.stack([x, y, np.cross(x, y)], axis=-1)
+
+
+# The 24 rotations that take the coordinate axes onto coordinate axes.
+_AXIS_TURNS = np.array([m for m in (np.diag(signs) @ np.eye(3)[list(order)]
+                                    for order in itertools.permutations(range(3))
+                                    for signs in itertools.product((1, -1), repeat=3))
+                        if np.linalg.det(m) > 0])
+
+
+def rest_turn(grot: np.ndarray, frame: np.ndarray, target_frame: np.ndarray) -> np.ndarray:
+    """A fixed turn (w-first quaternion) from a source joint's frame to the target's matching bone,
+    for joints whose world rotation is copied (pelvis, chest, head): the turn between where the
+    body's left/up/forward axes (``frame``, T×3×3, measured on the motion) sit in the joint's frame
+    and where they sit in the target's rest (``target_frame``), snapped to the nearest of the 24
+    axis-to-axis turns.
+
+    Why snapped: an exporter authors a rig's rest frames along its world axes (Bandai's pelvis has
+    its x axis up: copied as it is, Anny's pelvis lay on its side, the left foot hung 14 cm above
+    the right and the clean-up crouched the walk to reach the floor: 35 % skate, 36 mm penetration,
+    a 112° knee where the capture has 73°); what is left beyond such a quarter turn is the actor's
+    own posture (pelvis tilt, trunk lean), which is kept: on the CMU and CC4 rigs the turn is none.
+
+    >>> tilted = _axis_frame(np.array([[0.0, -1.0, 0.0]]), np.array([[1.0, 0.05, 0.0]]))  # lying on its side
+    >>> turn = rest_turn(np.tile(quat.IDENTITY, (1, 1)), tilted, np.eye(3))
+    >>> np.round(quat.rotate(turn, np.array([0.0, 1.0, 0.0])), 6).tolist()   # the target's up is the joint's x
+    [1.0, 0.0, 0.0]
+    """
+    local = np.einsum("tji,tjk->tik", quat.to_scipy(grot).as_matrix(), frame)      # Rᵀ·F per frame
+    u, _, vt = np.linalg.svd(local.mean(axis=0))
+    mean = u @ vt
+    want = mean @ np.asarray(target_frame).T
+    best = _AXIS_TURNS[np.argmax(np.einsum("nij,ij->n", _AXIS_TURNS, want))]
+    return quat.from_scipy(Rotation.from_matrix(best))
+
+
 def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
     """Anny world rotations (T×J×4) for the mapped bones; unmapped bones get None (marked)."""
     roles = role_indices(source)
@@ -117,11 +161,21 @@ def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
     tgt_rest = _rest_pos(rig)
     t = source.n_frames
     world: dict[int, np.ndarray] = {}
-    world[rig.index("root")] = grot[:, roles["pelvis"]]
-    chest = grot[:, roles["chest"]] if "chest" in roles else grot[:, roles["pelvis"]]
+    hips = gpos[:, roles["l_hip"]] - gpos[:, roles["r_hip"]]
+    trunk_top = roles.get("chest", roles.get("neck", roles.get("head")))
+    lean = gpos[:, trunk_top] - gpos[:, roles["pelvis"]] if trunk_top is not None else np.tile([0.0, 1.0, 0.0], (t, 1))
+    rest_hips = tgt_rest[rig.index("upperleg01.L")] - tgt_rest[rig.index("upperleg01.R")]
+    rest_lean = tgt_rest[rig.index("spine01")] - tgt_rest[rig.index("root")]
+    trunk = _axis_frame(hips, lean)
+    rest_trunk = _axis_frame(rest_hips, rest_lean)
+    world[rig.index("root")] = quat.mul(grot[:, roles["pelvis"]],
+                                        rest_turn(grot[:, roles["pelvis"]], trunk, rest_trunk))
+    chest = (quat.mul(grot[:, roles["chest"]], rest_turn(grot[:, roles["chest"]], trunk, rest_trunk))
+             if "chest" in roles else world[rig.index("root")])
     for i, name in enumerate(SPINE):
         world[rig.index(name)] = quat.slerp(world[rig.index("root")], chest, np.full(t, (i + 1) / len(SPINE)))
-    head = grot[:, roles["head"]] if "head" in roles else chest
+    head = (quat.mul(grot[:, roles["head"]], rest_turn(grot[:, roles["head"]], trunk, rest_trunk))
+            if "head" in roles else chest)
     for i, name in enumerate(NECK):
         world[rig.index(name)] = quat.slerp(chest, head, np.full(t, (i + 1) / len(NECK)))
     # Clavicles: the source's clavicle motion about its mean, on the target's chest (arms.clavicle_world:
