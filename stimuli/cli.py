@@ -19,6 +19,7 @@ from stimuli.errors import StimuliError
 
 # Modules that add commands, in the order `--help` lists them.
 COMMAND_MODULES = [
+    "stimuli.commands.init_cmd",
     "stimuli.commands.schema_cmd",
     "stimuli.commands.protocol_cmds",
     "analysis.commands",
