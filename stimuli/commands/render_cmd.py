@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from shapemotion.execution import SCHEDULER_HELP, SCHEDULER_METAVAR
 from stimuli.fileio import output_path
 
 
@@ -27,6 +28,7 @@ def register(subparsers) -> None:
     p.add_argument("--motions", type=Path, default=None,
                    help="folder written by 'shapemotion physics protocol' (Exp 2's NoCOM and COM motions)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--scheduler", metavar=SCHEDULER_METAVAR, help=SCHEDULER_HELP)
     p.add_argument("--verify", action="store_true",
                    help="only check the clips of an existing manifest: re-hash and decode every one")
     p.add_argument("--no-survey", action="store_true",
@@ -53,6 +55,7 @@ def register(subparsers) -> None:
 
 
 def run_render(args: argparse.Namespace) -> int:
+    from shapemotion.execution import errors_as, scheduler_option
     from stimuli.errors import StimuliError
     from stimuli.render.manifest import verify_manifest
     from stimuli.render.pipeline import disk_full_is_a_user_error, render_protocol, survey_for_render
@@ -69,9 +72,13 @@ def run_render(args: argparse.Namespace) -> int:
     if args.protocol is None:
         raise StimuliError("render: a PROTOCOL file is needed (only --verify works without one)")
     _check_render_options(args)
-    report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps, limit=args.limit,
-                             only=args.only, workers=args.workers, quick=args.quick, progress=not args.no_progress,
-                             source=args.poses, motions_dir=args.motions, warn=lambda line: print(f"warning: {line}"))
+    scheduler = scheduler_option(args.scheduler, StimuliError)
+    with errors_as(StimuliError):
+        report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps,
+                                 limit=args.limit, only=args.only, workers=args.workers, quick=args.quick,
+                                 progress=not args.no_progress,
+                                 source=args.poses, motions_dir=args.motions, scheduler=scheduler,
+                                 warn=lambda line: print(f"warning: {line}"))
     print(report.summary())
     if not args.no_survey:
         with disk_full_is_a_user_error(args.out):

@@ -142,7 +142,7 @@ def _worker_job(args):
 
 def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=None, only=None, workers=None,
                     quick: bool = False, progress: bool = True, source: str = "protocol", strict: bool = True,
-                    sheet: bool = True, motions_dir=None, warn=None) -> RenderReport:
+                    sheet: bool = True, motions_dir=None, warn=None, scheduler=None) -> RenderReport:
     """Render every test, practice and familiarization stimulus of a protocol's design.
 
     ``strict``: raise StimuliError after rendering what can be rendered when some stimuli could
@@ -150,6 +150,8 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     ``motions_dir``: the folder of ``shapemotion physics protocol`` (Exp 2's NoCOM/COM motions).
     ``warn``: called with each warning (a gait whose cadence the clip changes) before rendering;
     the warnings are also kept in ``report.warnings``.
+    ``scheduler``: a ``shapemotion.execution.Scheduler`` to render on a Dask cluster (None: the local
+    process pool of ``workers``); the clips come back as bytes and are written here.
     """
     from stimuli.design import build_design
     from stimuli.protocol import load_protocol
@@ -189,7 +191,8 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
         report.manifest = _update_manifest(out_dir, _ordered(rows, order))
         previous_handler = install_interrupt_handler()
         try:
-            for sid, row, error in _run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
+            run = _run if scheduler is None else _run_on(scheduler)
+            for sid, row, error in run(protocol, todo, (source, motions_dir), workers, progress, protocol.name):
                 if row is not None:
                     rows[sid] = row
                     report.rendered.append(sid)
@@ -231,7 +234,7 @@ def survey_for_render(report: RenderReport, video_base_url=None) -> tuple[list[s
 TEMPORARY_NAMES = {
     ".": r"\.(manifest\.csv|contact_sheet\.png|design\.json|conditions\.csv|trials\.csv)\.[a-z0-9_]{8}\.tmp",
     "clips": r"\..+\.[a-z0-9_]{8}\.tmp",            # video.write_video's private folder per clip
-    "posters": r"\..+\.\d+\.tmp\.png",             # video.write_png: .<name>.<pid>.tmp.png
+    "posters": r"\..+\.\d+\.tmp\.png|\..+\.[a-z0-9_]{8}\.tmp",   # video.write_png; fileio (--scheduler)
     "survey": r"\.(survey\.qsf|survey_qualtrics\.txt|qualtrics_manual_steps\.txt)\.[a-z0-9_]{8}\.tmp"
               r"|\.jspsych(\.old)?\.[a-z0-9_]{8}",   # stimuli.survey's staging folders
     "survey/psychopy": r"\..+\.[a-z0-9_]{8}\.tmp",
@@ -385,6 +388,40 @@ def _run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool,
                 raise
     finally:
         bar.close()
+
+
+def _run_on(scheduler):
+    """:func:`_run` on a Dask cluster: each clip is a task keyed by its inputs hash, rendered in the
+    worker's own temporary folder; the client writes the returned clip and poster atomically before
+    the clip enters the manifest, so no worker needs this folder."""
+    def run(protocol, jobs: list[Job], source: tuple, workers: int, progress: bool, name: str):
+        from shapemotion.execution import dask_client, run_tasks
+        from stimuli.fileio import atomic_write_bytes
+
+        by_key = {f"render-{job.stimulus.stimulus_id}-{job.digest}": job for job in jobs}
+        with dask_client(scheduler) as client:
+            tasks = {key: (protocol, job, *source) for key, job in by_key.items()}
+            for key, (sid, row, error, files) in run_tasks(client, remote_job, tasks, f"render {name}", "clip",
+                                                           progress):
+                if row is not None:
+                    atomic_write_bytes(by_key[key].clip, files["clip"])
+                    atomic_write_bytes(by_key[key].poster, files["poster"])
+                yield sid, row, error
+    return run
+
+
+def remote_job(protocol, job: Job, source: str, motions_dir):
+    """On a Dask worker: render one clip into a private temporary folder and return
+    (stimulus_id, manifest row or None, error or None, {"clip": bytes, "poster": bytes} or None)."""
+    import dataclasses
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="shapemotion-render-") as tmp:
+        here = dataclasses.replace(job, clip=Path(tmp) / "clips" / job.clip.name,
+                                   poster=Path(tmp) / "posters" / job.poster.name)
+        sid, row, error = _worker_job((protocol, here, source, motions_dir))
+        files = None if row is None else {"clip": here.clip.read_bytes(), "poster": here.poster.read_bytes()}
+    return sid, row, error, files
 
 
 MAX_REASONS, MAX_EXAMPLES = 8, 3  # enough to act on; the rest is counted, never dropped silently
