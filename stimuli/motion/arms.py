@@ -194,53 +194,96 @@ def arm_penetration(body, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     Signed distance of each upper-arm vertex along the outward normal of its nearest torso vertex
     (flank below the armpit), counted where that vertex is near and the arm vertex lies along its normal.
     """
+    check = _arm_check(body)
     verts = np.asarray(vertices, float).reshape(-1, body.n_vertices, 3)
-    torso, arms, faces, operator = _flank(body)
-    depth = np.zeros((len(verts), 2))
-    worst = np.full((len(verts), 2), -1)
-    for t, v in enumerate(verts):
-        flank = v[torso]
-        normals = operator @ np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
-        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-        tree = cKDTree(flank)
-        for k, side in enumerate(("L", "R")):
-            p = v[arms[side]]
-            dist, near = tree.query(p)
-            off = p - flank[near]
-            signed = np.einsum("ij,ij->i", off, normals[near])
-            lateral = np.linalg.norm(off - signed[:, None] * normals[near], axis=1)
-            inside = (dist < NEAR_M) & (lateral < LATERAL_M) & (signed < 0)
-            if inside.any():
-                j = int(np.argmin(np.where(inside, signed, np.inf)))
-                depth[t, k], worst[t, k] = -signed[j], arms[side][j]
-    return depth, worst
+    depth, worst = _depths(check, verts[:, check.keep])
+    return depth, np.where(worst >= 0, check.keep[worst], -1)
 
 
-def _flank(body):
-    """The torso flank's vertices, the upper arms' vertices, the faces around the flank and the
-    (flank vertices × those faces) normal operator — cached on the body (normals of the flank only:
-    the whole mesh's cost most of the time)."""
-    cached = getattr(body, "_arm_flank", None)
-    if cached is None:
+class _ArmCheck:
+    """What :func:`arm_penetration` needs of one body, in a subset of its vertices (``keep``: the flank,
+    the faces around it and the upper arms): that subset's indices of the flank and arm vertices and of
+    the faces around the flank, the (flank × those faces) normal operator, and the subset's skinning
+    weights (vertices × bones) — so that a pose is checked without skinning the whole mesh."""
+
+    def __init__(self, body):
         import scipy.sparse
 
         torso, arms = _arm_sets(body)
         faces = np.asarray(body.faces)
         around = faces[np.isin(faces, torso).any(axis=1)]
-        row = {v: i for i, v in enumerate(torso)}
-        rows, cols = [], []
-        for f, tri in enumerate(around):
-            for v in tri:
-                if v in row:
-                    rows.append(row[v])
-                    cols.append(f)
-        operator = scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(torso), len(around)))
-        cached = (torso, arms, around, operator)
+        self.keep = np.unique(np.concatenate([around.ravel(), arms["L"], arms["R"]]))
+        self.torso = np.searchsorted(self.keep, torso)
+        self.arms = {side: np.searchsorted(self.keep, arms[side]) for side in ("L", "R")}
+        self.faces = np.searchsorted(self.keep, around)
+        on_flank = np.isin(around.ravel(), torso)   # torso is sorted (np.unique, then a mask)
+        rows = np.searchsorted(torso, around.ravel()[on_flank])
+        cols = np.repeat(np.arange(len(around)), 3)[on_flank]
+        self.operator = scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)),
+                                                shape=(len(torso), len(around)))
+        self.rest = np.asarray(body.vertices, float)[self.keep]
+        self.weights = None
+        if getattr(body, "skinner", None) is None:   # Anny's skinning: the subset's rows of its weights
+            from stimuli.bodies.backend import topology
+
+            topo = topology()
+            w, idx = topo["weights"][self.keep], topo["indices"][self.keep]
+            self.weights = scipy.sparse.csr_matrix(
+                (w.ravel().astype(float), (np.repeat(np.arange(len(self.keep)), w.shape[1]), idx.ravel())),
+                shape=(len(self.keep), body.rig.n_bones))
+
+    def skin(self, body, rotations, root_translation) -> np.ndarray:
+        """Posed subset vertices (T, S, 3): Anny's linear-blend skinning of the subset alone."""
+        if self.weights is None:
+            return body.skin(rotations, root_translation)[:, self.keep]
+        transforms = body.rig.skinning_transforms(rotations, root_translation)[:, :, :3, :]   # (T, J, 3, 4)
+        n = len(transforms)
+        blended = (self.weights @ transforms.transpose(1, 0, 2, 3).reshape(body.rig.n_bones, -1))
+        blended = blended.reshape(len(self.keep), n, 3, 4)
+        return (np.einsum("stij,sj->tsi", blended[..., :3], self.rest) + blended[..., 3].transpose(1, 0, 2))
+
+
+def _arm_check(body) -> _ArmCheck:
+    """The body's :class:`_ArmCheck`, cached on the body (recomputed each call on a frozen one)."""
+    cached = getattr(body, "_arm_check", None)
+    if cached is None:
+        cached = _ArmCheck(body)
         try:
-            body._arm_flank = cached
-        except (AttributeError, TypeError):  # a frozen body: recomputed each call
+            body._arm_check = cached
+        except (AttributeError, TypeError):
             pass
     return cached
+
+
+def _depths(check: _ArmCheck, verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`arm_penetration` on subset vertices (T, S, 3); the deepest vertex as a subset index."""
+    f = check.faces
+    face_n = np.cross(verts[:, f[:, 1]] - verts[:, f[:, 0]], verts[:, f[:, 2]] - verts[:, f[:, 0]])   # (T, F, 3)
+    normals = (check.operator @ face_n.transpose(1, 0, 2).reshape(len(f), -1)).reshape(len(check.torso), -1, 3)
+    normals /= np.maximum(np.linalg.norm(normals, axis=2, keepdims=True), 1e-12)
+    both = np.concatenate([check.arms["L"], check.arms["R"]])
+    points, flank = verts[:, both], verts[:, check.torso]
+    dist, near = np.empty(points.shape[:2]), np.empty(points.shape[:2], int)
+    for t in range(len(verts)):   # the flank moves with the pose: one tree per frame (unbalanced: built faster)
+        tree = cKDTree(flank[t], balanced_tree=False, compact_nodes=False)
+        dist[t], near[t] = tree.query(points[t], distance_upper_bound=NEAR_M)
+    near = np.minimum(near, flank.shape[1] - 1)   # none within NEAR_M: inf and an index past the end
+    frames = np.arange(len(verts))[:, None]
+    n = normals.transpose(1, 0, 2)[frames, near]
+    off = points - flank[frames, near]
+    signed = np.einsum("tij,tij->ti", off, n)
+    lateral = np.linalg.norm(off - signed[..., None] * n, axis=2)
+    inside = (dist < NEAR_M) & (lateral < LATERAL_M) & (signed < 0)
+    depth = np.zeros((len(verts), 2))
+    worst = np.full((len(verts), 2), -1)
+    split = len(check.arms["L"])
+    for k, part in enumerate((slice(0, split), slice(split, None))):
+        masked = np.where(inside[:, part], signed[:, part], np.inf)
+        j = np.argmin(masked, axis=1)
+        hit = inside[:, part].any(axis=1)
+        depth[hit, k] = -masked[hit, j[hit]]
+        worst[hit, k] = both[part][j[hit]]
+    return depth, worst
 
 
 def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEARANCE_M, passes: int = 5) -> np.ndarray:
@@ -250,16 +293,20 @@ def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEAR
     The abduction turns the upper arm about the chest's forward axis; its angle is the depth over the
     deepest vertex's distance from the shoulder joint, spread over neighbouring frames (a running
     maximum, then smoothed) so the arm does not twitch. Frames already clear are left as they are.
+    Only the flank and the arms are skinned, and after each pass only the frames it turned are
+    measured again (a frame's skin depends on its own pose alone).
     """
     rig = body.rig
+    check = _arm_check(body)
     rot = np.array(rotations, float)
     root = np.asarray(root_translation, float)
     chest = rig.index("spine01")
-    for _ in range(passes):
-        verts = body.skin(rot, root)
-        depth, worst = arm_penetration(body, verts)
+    verts = check.skin(body, rot, root)
+    depth, worst = _depths(check, verts)
+    for done in range(passes):
         if depth.max(initial=0.0) <= SEAM_DEPTH_M:
             break
+        before = rot.copy()
         grot, heads = rig.forward_kinematics(rot, root)
         for k, (side, sign) in enumerate((("L", 1.0), ("R", -1.0))):
             arm = rig.index(f"upperarm01.{side}")
@@ -276,6 +323,10 @@ def clear_arms(body, rotations, root_translation, clearance_m: float = ARM_CLEAR
             axis_parent = np.einsum("tji,tj->ti", grot[:, parent], forward)  # into the parent's axes
             turn = quat.from_axis_angle(_unit(axis_parent) * (sign * need)[:, None])
             rot[:, arm] = quat.mul(turn, rot[:, arm])
+        changed = np.flatnonzero((rot != before).any(axis=(1, 2)))
+        if done + 1 < passes and len(changed):
+            verts[changed] = check.skin(body, rot[changed], root[changed])
+            depth[changed], worst[changed] = _depths(check, verts[changed])
     return rot
 
 
