@@ -143,10 +143,9 @@ def actor_motion(protocol, actor_id: str, gait: str, body, look: Look):
         motion = looped_capture(protocol, actor_id, gait)
     else:
         cycles = cycles_for_clip(look.duration_s, spec.cadence_spm)
-        motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, spec.speed_mps, protocol.seed,
-                            float(look.fps), cycles)
         # Same belt speed for every body: the protocol's, whatever the legs and the loop's fit (timing.py)
-        matched = belt_matched_speed(spec.speed_mps, motion, body, look.n_frames / look.fps, look.loop)
+        matched = belt_matched_speed(spec.speed_mps, spec.cadence_spm, cycles, float(look.fps), actor.height_m, body,
+                                     look.n_frames / look.fps, look.loop)
         motion = _generated(actor.model_dump_json(), gait, spec.cadence_spm, matched, protocol.seed,
                             float(look.fps), cycles)
     on_body = on_rig(motion, body)

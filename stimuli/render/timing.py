@@ -104,23 +104,26 @@ def gait_fit(gait: str, cadence_spm: float, speed_mps: float, duration_s: float,
                    whole_cycles(duration_s, cadence_spm), bool(loop), float(fps))
 
 
-def belt_matched_speed(speed_mps: float, probe, body, clip_s: float, loop: bool = True) -> float:
+def belt_matched_speed(speed_mps: float, cadence_spm: float, cycles: int, fps: float, height_m: float, body,
+                       clip_s: float, loop: bool = True) -> float:
     """The speed to generate a gait at so that, on ``body`` and in the clip, the belt runs at ``speed_mps``.
 
-    ``probe`` is the generator's motion at ``speed_mps`` (its skeleton and loop length do not
-    depend on the speed). Two things change the belt speed after generation: retargeting scales
+    The gait is the generator's loop of ``cycles`` cycles at ``cadence_spm`` and ``fps`` for an actor
+    of stature ``height_m``. Two things change the belt speed after generation: retargeting scales
     the stride by the legs' ratio ``k`` (``stimuli.motion.retarget``), and ``fit_loop`` plays the
     loop ``s`` times faster to fill the clip with whole cycles (112 steps/min shown at 120 in a
-    4-s clip). Generating at ``speed_mps / (k·s)`` makes the shown belt speed exactly the
-    protocol's for every body; the cadence stays the clip's, so the step length is
-    ``speed / cadence`` (0.60 m for a 1.2 m/s walk at 120 steps/min) for everyone.
+    4-s clip). Generating at ``speed_mps / (k·s)`` makes the shown belt speed the protocol's for
+    every body (within 0.06 %: ``generated_leg_length``); the cadence stays the clip's, so the step
+    length is ``speed / cadence`` (0.60 m for a 1.2 m/s walk at 120 steps/min) for everyone. Both
+    factors come from the skeleton and the frame count alone, so the gait is generated once.
     """
+    from stimuli.motion.generate import generated_leg_length, loop_frames
     from stimuli.motion.retarget import rig_leg_length
-    from stimuli.motion.skeleton import leg_length
 
-    legs = rig_leg_length(body.rig) / leg_length(probe)
-    loops = max(1, int(round(clip_s / (probe.n_frames / probe.fps))))
-    faster = loops * probe.n_frames / probe.fps / clip_s if loop else 1.0
+    legs = rig_leg_length(body.rig) / generated_leg_length(height_m)
+    loop_s = loop_frames(cycles, cadence_spm, fps) / fps
+    loops = max(1, int(round(clip_s / loop_s)))
+    faster = loops * loop_s / clip_s if loop else 1.0
     return float(speed_mps) / (legs * faster)
 
 
