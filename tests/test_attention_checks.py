@@ -1,7 +1,8 @@
 """Attention checks: protocol block → jsPsych page (headless Chromium) → data flag → import report and exclusion.
 
 The block is optional: without it the design files are byte for byte what they were. The checks live in
-the jsPsych export only; Qualtrics/PsychoPy exports and ``shapemotion serve`` refuse them by name.
+the jsPsych export (and ``shapemotion serve``, tests/test_serve_checks.py); Qualtrics/PsychoPy exports
+refuse them by name.
 """
 
 from __future__ import annotations
@@ -69,10 +70,6 @@ def test_only_the_jspsych_export_carries_them(tmp_path):
     results = {r.format: r for r in export_all(design, tmp_path / "all")}
     assert (tmp_path / "all" / "jspsych" / "index.html").exists() and not (tmp_path / "all" / "psychopy").exists()
     assert "attention_checks" in results["psychopy"].notes[0]
-    from stimuli.serve.study import load_study
-
-    with pytest.raises(StimuliError, match="attention_checks, which shapemotion serve does not store yet"):
-        load_study(design)
     # the page gets the answer spelled as its button, and the request escaped
     cfg = config(load_source(design))
     assert cfg["attention"] == {"every": 2, "answer": "Medium",

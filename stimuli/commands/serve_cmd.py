@@ -29,6 +29,12 @@ def register(subparsers) -> None:
     p.add_argument("--admin-token", default=None,
                    help="token for /admin/progress and /admin/export.csv (default: a random one, printed; "
                         "or $SHAPEMOTION_ADMIN_TOKEN)")
+    p.add_argument("--rate", default="5/s",
+                   help="requests a second each client may send per session (answers, events, finish) and to "
+                        "start sessions, as N/s or N/min; over it: 429 with Retry-After, which the page "
+                        "honours (default 5/s; 0: no limit)")
+    p.add_argument("--burst", type=int, default=100,
+                   help="requests a client may send at once before --rate applies (default 100)")
     p.add_argument("--out", type=Path, default=None, help="export: the CSV to write")
     p.set_defaults(func=run_serve)
 
@@ -48,20 +54,27 @@ def run_serve(args: argparse.Namespace) -> int:
     return run_server(Path(args.target[0]), args)
 
 
-def check_server_options(args: argparse.Namespace) -> str:
-    """The admin token; every option checked before anything starts."""
+def check_server_options(args: argparse.Namespace) -> tuple[str, float]:
+    """The admin token and the rate limit; every option checked before anything starts."""
     import os
 
     from stimuli.errors import StimuliError
+    from stimuli.serve.limits import parse_rate
 
     if not 0 < args.port < 65536:
         raise StimuliError(f"--port {args.port}: expected 1 to 65535")
     if not args.expire_min > 0:
         raise StimuliError(f"--expire-min {args.expire_min}: expected a positive number of minutes")
+    try:
+        rate = parse_rate(args.rate)
+    except ValueError as exc:
+        raise StimuliError(str(exc)) from None
+    if args.burst < 1:
+        raise StimuliError(f"--burst {args.burst}: expected at least 1 request")
     token = args.admin_token or os.environ.get("SHAPEMOTION_ADMIN_TOKEN") or secrets.token_urlsafe(18)
     if not re.fullmatch(r"[A-Za-z0-9_.~-]{12,200}", token):
         raise StimuliError("--admin-token: expected at least 12 letters, digits or _.~- (it guards the answers)")
-    return token
+    return token, rate
 
 
 def run_server(folder: Path, args: argparse.Namespace) -> int:
@@ -73,13 +86,14 @@ def run_server(folder: Path, args: argparse.Namespace) -> int:
     from stimuli.serve.db import Database
     from stimuli.serve.study import load_study
 
-    token = check_server_options(args)
+    token, rate = check_server_options(args)
     study = load_study(folder)
     db = Database(args.db or folder / DB_NAME, study.fingerprint)
-    app = create_app(study, db, token, expire_s=args.expire_min * 60)
+    app = create_app(study, db, token, expire_s=args.expire_min * 60, rate=rate, burst=args.burst)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    print(f"serving {study.protocol.name} ({len(study.lists)} lists) at http://{args.host}:{args.port}/",
-          file=sys.stderr)
+    limit = f"rate limit {args.rate} per client and session, burst {args.burst}" if rate else "no rate limit"
+    print(f"serving {study.protocol.name} ({len(study.lists)} lists) at http://{args.host}:{args.port}/ "
+          f"({limit})", file=sys.stderr)
     if not args.admin_token:
         print(f"admin token: {token}", file=sys.stderr)
     # one worker: the assignment and the database lock live in this process

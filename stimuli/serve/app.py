@@ -8,11 +8,13 @@ Routes (all answers JSON; every refused request gets a 4xx, is logged, and store
     POST /api/sessions/{id}/trials          one answer: {"index": position, "response": …, "rt": ms}
     POST /api/sessions/{id}/events          a clip that failed: {"kind": "load_failed"|"play_failed", "clip": id}
     POST /api/sessions/{id}/finish          all answered → {"redirect": completion URL or null}
-    GET  /admin/progress  /admin/export.csv  behind "Authorization: Bearer <admin token>"
+    GET  /admin/progress  /admin/export.csv  /admin/limits   behind "Authorization: Bearer <admin token>"
 
 The session routes need the ``X-Session-Token`` header the start route returned: a participant can
 read and write only their own session. Served files are a fixed list (the page, jsPsych, the clips of
-the design): no other path, the database included, can be reached.
+the design): no other path, the database included, can be reached. The session routes and the start
+are rate limited per client address and session (:mod:`stimuli.serve.limits`): a request over the
+limit gets 429 with ``Retry-After`` before anything is read or stored, and is counted for the admin.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import hmac
 import json
 import logging
+import math
 import re
 import sqlite3
 import time
@@ -33,6 +36,7 @@ from starlette.routing import Route
 from stimuli.serve.assign import candidate_lists, least_filled
 from stimuli.serve.db import Database
 from stimuli.serve.export import export_csv
+from stimuli.serve.limits import BURST, RATE, RateLimiter
 from stimuli.serve.study import Study, check_answer, check_rt, export_row
 from stimuli.survey import jspsych
 
@@ -42,6 +46,7 @@ SESSION_ID = re.compile(r"^[0-9a-f]{16}$")
 PARTICIPANT_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 PARAM_VALUE = re.compile(r"^[A-Za-z0-9_.:-]{0,64}$")   # ':' for Prolific-like ids of other platforms
 EVENT_KINDS = {"load_failed", "play_failed"}
+LIMITED_ROUTES = ("start", "resume", "trials", "events", "finish")
 # Preloaded clips play from blob: URLs; jsPsych sets inline styles.
 SECURITY_HEADERS = [(b"x-content-type-options", b"nosniff"), (b"x-frame-options", b"DENY"),
                     (b"referrer-policy", b"same-origin"),
@@ -54,8 +59,10 @@ class Refused(HTTPException):
     """A request the server turns down (4xx) with a message saying what was expected."""
 
 
-def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3600.0, clock=time.time):
-    """The ASGI app serving ``study`` with answers in ``db``.
+def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3600.0, clock=time.time,
+               rate: float = RATE, burst: int = BURST):
+    """The ASGI app serving ``study`` with answers in ``db``; ``rate`` requests a second per client and
+    session after a ``burst`` (``rate=0``: no limit).
 
     >>> from starlette.testclient import TestClient            # doctest: +SKIP
     >>> TestClient(create_app(study, db, "secret")).get("/admin/progress").status_code  # doctest: +SKIP
@@ -64,6 +71,9 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
     index = jspsych.index_html(study.source)
     config = jspsych.config_js(study.config)
     between = study.source.between
+    limiter = RateLimiter(rate, burst) if rate else None
+    limited = dict.fromkeys(LIMITED_ROUTES, 0)     # 429s since the server started, by route
+    limited_sessions: dict[str, int] = {}         # … and by session (existing sessions only)
 
     # -- helpers ----------------------------------------------------------------------------------
     def state(session: dict) -> dict:
@@ -87,6 +97,24 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
             raise Refused(403, f"session {sid}: the X-Session-Token is not this session's")
         return session
 
+    def limit(request: Request, route: str) -> None:
+        """Refuse (429, Retry-After) a request over its client's rate, before anything is read or stored.
+
+        The key is the client's address and the session the request is for; starting a session, and a
+        request for no known session, count against the address alone.
+        """
+        if limiter is None:
+            return
+        sid = request.path_params.get("sid", "")
+        known = bool(SESSION_ID.fullmatch(sid)) and db.session(sid) is not None
+        wait = limiter.take((request.client.host if request.client else "", sid if known else route), clock())
+        if wait:
+            limited[route] += 1
+            if known:
+                limited_sessions[sid] = limited_sessions.get(sid, 0) + 1
+            raise Refused(429, f"{route}: too many requests from this client; retry after {math.ceil(wait)} s",
+                          headers={"Retry-After": str(math.ceil(wait))})
+
     def check_admin(request: Request) -> None:
         given = request.headers.get("authorization", "")
         if not hmac.compare_digest(given.encode(), f"Bearer {admin_token}".encode()):
@@ -108,6 +136,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
 
     # -- participants -----------------------------------------------------------------------------
     async def start(request: Request) -> Response:
+        limit(request, "start")
         body = await read_json(request)
         given = body.get("params", {})
         if not isinstance(given, dict):
@@ -143,11 +172,13 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
         return JSONResponse(state(session))
 
     async def resume(request: Request) -> Response:
+        limit(request, "resume")
         session = own_session(request)
         db.touch(session["id"], clock())
         return JSONResponse(state(session))
 
     async def answer(request: Request) -> Response:
+        limit(request, "trials")
         session = own_session(request)
         body = await read_json(request)
         trials = study.lists[session["list"]]["trials"]
@@ -156,8 +187,9 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
             raise Refused(400, f"index: expected the list position 0 to {len(trials) - 1}, got {str(index)[:20]}")
         trial = trials[index]
         try:
-            response = check_answer(study.response_type, study.config["response"]["labels"], trial["positions"],
-                                    body.get("response"), trial["kind"])
+            labels = study.config["response"]["labels"]
+            response = check_answer(study.response_type, labels, trial.get("positions", []), body.get("response"),
+                                    trial["kind"])
             rt = check_rt(body.get("rt"))
         except ValueError as exc:
             raise Refused(422, f"trial {index}: {exc}") from None
@@ -175,6 +207,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
         return JSONResponse({"stored": True, "next": index + 1})
 
     async def event(request: Request) -> Response:
+        limit(request, "events")
         session = own_session(request)
         body = await read_json(request)
         kind, clip = body.get("kind"), body.get("clip")
@@ -187,6 +220,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
         return JSONResponse({"stored": True})
 
     async def finish(request: Request) -> Response:
+        limit(request, "finish")
         session = own_session(request)
         total = len(study.lists[session["list"]]["trials"])
         answered = len(db.answered(session["id"]))
@@ -198,7 +232,12 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
     # -- the researcher ---------------------------------------------------------------------------
     async def progress(request: Request) -> Response:
         check_admin(request)
-        return JSONResponse(progress_report(study, db, clock() - expire_s))
+        return JSONResponse(progress_report(study, db, clock() - expire_s, limited_sessions))
+
+    async def limits(request: Request) -> Response:
+        check_admin(request)
+        setting = {"rate_per_s": limiter.rate, "burst": limiter.burst} if limiter else {"rate_per_s": None}
+        return JSONResponse(setting | {"refused": limited})
 
     async def export(request: Request) -> Response:
         check_admin(request)
@@ -209,7 +248,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
         if exc.status_code >= 400:
             log.warning("%s %s: %d %s", request.method, request.url.path[:200], exc.status_code, exc.detail)
         return JSONResponse({"error": exc.detail}, status_code=exc.status_code,
-                            headers={"cache-control": "no-store"})
+                            headers={"cache-control": "no-store"} | (exc.headers or {}))
 
     routes = [Route("/", page), Route("/index.html", page), Route("/config.js", config_js),
               Route("/api/sessions", start, methods=["POST"]),
@@ -217,7 +256,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
               Route("/api/sessions/{sid}/trials", answer, methods=["POST"]),
               Route("/api/sessions/{sid}/events", event, methods=["POST"]),
               Route("/api/sessions/{sid}/finish", finish, methods=["POST"]),
-              Route("/admin/progress", progress), Route("/admin/export.csv", export),
+              Route("/admin/progress", progress), Route("/admin/export.csv", export), Route("/admin/limits", limits),
               Route("/{path:path}", static)]
     app = Starlette(routes=routes, exception_handlers={HTTPException: refused})
     return SecurityHeaders(app)
@@ -242,17 +281,19 @@ async def read_json(request: Request, limit: int = MAX_BODY) -> dict:
     return data
 
 
-def progress_report(study: Study, db: Database, since: float) -> list[dict]:
-    """Per list: its between groups, finished and in-progress sessions, expired ones, answers stored."""
-    counts = db.count_answers()
+def progress_report(study: Study, db: Database, since: float, limited: dict[str, int] | None = None) -> list[dict]:
+    """Per list: its between groups, finished and in-progress sessions, expired ones, answers stored, and
+    ``rate_limited``: requests of its sessions refused with 429 since the server started (``limited``)."""
+    counts, limited = db.count_answers(), limited or {}
     report = {n: {"list": n, "groups": e["groups"], "finished": 0, "in_progress": 0, "expired": 0, "answers": 0,
-                  "trials": len(e["trials"])} for n, e in sorted(study.lists.items())}
+                  "trials": len(e["trials"]), "rate_limited": 0} for n, e in sorted(study.lists.items())}
     for s in db.sessions():
         entry = report.setdefault(s["list"], {"list": s["list"], "groups": {}, "finished": 0, "in_progress": 0,
-                                              "expired": 0, "answers": 0, "trials": 0})
+                                              "expired": 0, "answers": 0, "trials": 0, "rate_limited": 0})
         status = "finished" if s["finished"] is not None else "in_progress" if s["seen"] >= since else "expired"
         entry[status] += 1
         entry["answers"] += counts.get(s["id"], 0)
+        entry["rate_limited"] += limited.get(s["id"], 0)
     return list(report.values())
 
 

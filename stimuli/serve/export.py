@@ -24,7 +24,8 @@ from stimuli.serve.db import Database
 FIRST = ["rt", "trial_type", "trial_index", "participant", "session", "list"]
 # The fields of an answer row that belong to its trial (what a closing row leaves out).
 TRIAL_KEYS = {"rt", "trial_type", "trial_index", "stimulus_id", "clip_id", "kind", "practice", "block", "block_label",
-              "trial", "repetition", "left", "right", "positions", "response", "response_label", "rating", "chosen"}
+              "trial", "repetition", "left", "right", "positions", "response", "response_label", "rating", "chosen",
+              "attention_check", "attention_answer", "attention_passed"}
 SESSION_FIELDS = ["session", "participant", "list", "status", "answers", "started", "finished", "browser",
                   "failed_clips", "params"]
 

@@ -68,13 +68,10 @@ def load_study(folder: str | Path) -> Study:
     The clips must be in the folder: the server is the only place they are served from.
     """
     source = load_source(folder)
-    if source.protocol.attention_checks is not None:   # its database holds design trials only
-        raise StimuliError(f"{folder}: the protocol has attention_checks, which shapemotion serve does not store "
-                           f"yet; run the study from the static jsPsych export (shapemotion survey {folder} "
-                           f"--format jspsych, post_trial=URL to collect each answer), or remove attention_checks")
     data = jspsych.config(source)
     lists = {}
     for entry in data.pop("lists"):
+        entry["trials"] = with_checks(entry["trials"], data.get("attention"))
         for index, trial in enumerate(entry["trials"]):
             trial["index"] = index
         lists[entry["list"]] = entry
@@ -97,14 +94,40 @@ def load_study(folder: str | Path) -> Study:
     return Study(source, lists, data, files, digest)
 
 
+def with_checks(trials: list[dict], attention: dict | None) -> list[dict]:
+    """The list with an attention check after every ``every``-th test trial, none after the last.
+
+    The place is the static page's (experiment.js, buildTimeline); served, the checks are items of the
+    list, so they are stored, resumed and validated by position like the design's trials.
+
+    >>> trials = [{"kind": "practice", "block": 1}] + [{"kind": "test", "block": 1}] * 5
+    >>> [t["kind"] for t in with_checks(trials, {"every": 2})]
+    ['practice', 'test', 'test', 'attention_check', 'test', 'test', 'attention_check', 'test']
+    """
+    if not attention:
+        return trials
+    n_tests = sum(t["kind"] == "test" for t in trials)
+    out, tests = [], 0
+    for trial in trials:
+        out.append(trial)
+        if trial["kind"] == "test":
+            tests += 1
+            if tests % attention["every"] == 0 and tests < n_tests:
+                out.append({"kind": "attention_check", "block": trial["block"]})
+    return out
+
+
 def check_answer(response_type: str, labels: list[str], positions: list[str], response, kind: str = "test"):
     """The answer if it fits the trial, else ValueError saying what was expected.
 
     Familiarisation clips have one button (0); Likert and forced choice answer with a button index;
-    a ranking answers with every label once, best first.
+    a ranking answers with every label once, best first; an attention check shows the answer labels as
+    buttons (whatever the response type) and answers with a label's index.
     """
     if kind == "familiarization":
         n = 1
+    elif kind == "attention_check":
+        n = len(labels)
     elif response_type == "ranking":
         if (not isinstance(response, list) or sorted(map(str, response)) != sorted(labels)
                 or not all(isinstance(x, str) for x in response)):
@@ -132,6 +155,8 @@ def export_row(study: Study, session: dict, trial: dict, response, rt: float | N
 
     ``session`` holds ``id``, ``participant`` and ``list``; ``trial`` is the design's trial at this position.
     """
+    if trial["kind"] == "attention_check":
+        return check_row(study, session, trial, response, rt)
     entry = study.lists[session["list"]]
     labels = study.config["response"]["labels"]
     answered = trial["kind"] != "familiarization"
@@ -155,3 +180,15 @@ def export_row(study: Study, session: dict, trial: dict, response, rt: float | N
     else:
         row |= {"response": response, "response_label": labels[response], "chosen": positions[response]}
     return row
+
+
+def check_row(study: Study, session: dict, trial: dict, response: int, rt: float | None) -> dict:
+    """An attention check's row, as the static runtime writes it (attentionCheck in experiment.js): the
+    requested and the given label, which ``analyze`` judges again (analysis/responses/attention.py)."""
+    entry = study.lists[session["list"]]
+    asked, given = study.config["attention"]["answer"], study.config["response"]["labels"][response]
+    return {"rt": "" if rt is None else round(rt), "trial_type": "html-button-response",
+            "trial_index": trial["index"], "participant": session["participant"], "session": session["id"],
+            "list": session["list"], **entry["groups"], "protocol": study.protocol.name,
+            "attention_check": 1, "attention_answer": asked, "response": response, "response_label": given,
+            "attention_passed": int(given == asked)}

@@ -23,7 +23,10 @@
  * (failed_video in the data; in server mode also an event with the browser) and its answer buttons
  * are enabled so the participant can go on.
  * With the protocol's attention_checks (config.attention), a check follows every `every`-th test trial
- * (none after the last): attention_check = 1, attention_answer, response_label, attention_passed.
+ * (none after the last): attention_check = 1, attention_answer, response_label, attention_passed. A served
+ * list has the checks as items already (kind "attention_check"), so they are stored and resumed by position.
+ * The server may refuse a request with 429 (rate limit): the page waits the Retry-After it names, then
+ * sends the same request again.
  *
  * Layout: the question is moved above the clip and the clip is scaled to the window (fitVideo) so
  * that question, clip and answer buttons fit without scrolling, on a laptop as on a large screen.
@@ -57,7 +60,8 @@
   var postTrialUrl = params.get("post_trial") || cfg.post_trial_url || "";
   var server = cfg.server ? serverClient() : null;
   var chosen = null, resumed = false, playFailure = null, jsPsych = null;
-  window.SHAPEMOTION_STATUS = { done: false, posted: null, list: null, saved: 0, errors: [], failed: [] };
+  window.SHAPEMOTION_STATUS = { done: false, posted: null, list: null, saved: 0, errors: [], failed: [],
+                                limited: 0 };
 
   /** Talks to `shapemotion serve`: one request at a time, so answers arrive in order. */
   function serverClient() {
@@ -70,9 +74,11 @@
                            body: body === undefined ? undefined : JSON.stringify(body) });
     }
 
-    /** Send until the server answers; a 4xx is final (recorded), a network error or 5xx is retried. */
+    /** Send until the server answers; a 4xx is final (recorded), a network error or 5xx is retried; a 429
+     * (too many requests) is sent again after its Retry-After without using up a try. */
     function send(path, body, tries) {
       return request("POST", path, body).then(function (r) {
+        if (r.status === 429) { return later(r).then(function () { return send(path, body, tries); }); }
         if (r.status >= 500 && tries > 0) { throw new Error("server " + r.status); }
         return r.json().then(function (answer) {
           if (r.status >= 400) { window.SHAPEMOTION_STATUS.errors.push(r.status + " " + answer.error); }
@@ -85,18 +91,30 @@
       });
     }
 
+    /** A promise that resolves once the 429 response's Retry-After (seconds, at least 1) has passed. */
+    function later(r) {
+      var seconds = Math.max(1, parseInt(r.headers.get("Retry-After"), 10) || 1);
+      window.SHAPEMOTION_STATUS.limited += 1;
+      return new Promise(function (ok) { window.setTimeout(ok, seconds * 1000); });
+    }
+
+    /** Starts or resumes the session, again after a 429's Retry-After (other failures are final). */
+    function open(body) {
+      return request("POST", "api/sessions", body).then(function (r) {
+        if (r.status === 429) { return later(r).then(function () { return open(body); }); }
+        return r.json().then(function (answer) {
+          if (!r.ok) { throw new Error(answer.error || ("server " + r.status)); }
+          return answer;
+        });
+      });
+    }
+
     return {
       start: function () {
         var stored = null, urlParams = {};
         try { stored = JSON.parse(window.localStorage.getItem(key) || "null"); } catch (e) { stored = null; }
         params.forEach(function (value, name) { urlParams[name] = value; });
-        return request("POST", "api/sessions", { params: urlParams, resume: stored })
-          .then(function (r) {
-            return r.json().then(function (answer) {
-              if (!r.ok) { throw new Error(answer.error || ("server " + r.status)); }
-              return answer;
-            });
-          })
+        return open({ params: urlParams, resume: stored })
           .then(function (state) {
             session = state;
             try { window.localStorage.setItem(key, JSON.stringify({ session: state.session, token: state.token })); }
@@ -304,7 +322,7 @@
   }
 
   /** An instructed-response check: the request, the usual answer buttons; the data say whether it was met. */
-  function attentionCheck() {
+  function attentionCheck(item) {
     var labels = cfg.response.labels;
     return { type: jsPsychHtmlButtonResponse,
              stimulus: "<div id=\"shapemotion-prompt\">" + cfg.attention.prompt + "</div>",
@@ -313,7 +331,7 @@
              on_finish: function (data) {
                data.response_label = labels[data.response];
                data.attention_passed = data.response_label === cfg.attention.answer ? 1 : 0;
-               saveTrial(null, data);
+               saveTrial(item, data);
              } };
   }
 
@@ -323,7 +341,7 @@
 
   /** Loads one block's clips with a progress bar; a clip that fails is recorded and the study goes on. */
   function preload(trials, block) {
-    var clips = trials.filter(function (t) { return t.block === block; })
+    var clips = trials.filter(function (t) { return t.block === block && t.kind !== "attention_check"; })
       .map(function (t) { return cfg.clips[t.id]; })
       .filter(function (c, i, all) { return all.indexOf(c) === i; });
     return { type: jsPsychPreload, video: clips, auto_preload: false, show_progress_bar: true,
@@ -334,16 +352,31 @@
              } };
   }
 
+  /** The list with a check after every `every`-th test trial, none after the last; a served list has them
+   * already (the same rule: with_checks in stimuli/serve/study.py). */
+  function withChecks(trials) {
+    if (server || !cfg.attention) { return trials; }
+    var nTests = trials.filter(function (t) { return t.kind === "test"; }).length, tests = 0, out = [];
+    trials.forEach(function (trial) {
+      out.push(trial);
+      if (trial.kind === "test") {
+        tests += 1;
+        if (tests % cfg.attention.every === 0 && tests < nTests) {
+          out.push({ kind: "attention_check", block: trial.block });
+        }
+      }
+    });
+    return out;
+  }
+
   function buildTimeline() {
-    var trials = chosen.trials;
+    var trials = withChecks(chosen.trials);
     var timeline = resumed ? [screen(cfg.text.instructions, cfg.text.continue)]
       : [screen(cfg.text.consent, cfg.text.agree), screen(cfg.text.instructions, cfg.text.continue)];
     var nBlocks = trials.reduce(function (m, t) { return Math.max(m, t.block); }, 0);
-    var previous = null, loaded = null, tests = 0;
-    var nTests = trials.filter(function (t) { return t.kind === "test"; }).length;
-    // shapemotion serve refuses protocols with attention checks (it stores design trials only)
-    var every = cfg.attention && !server ? cfg.attention.every : 0;
+    var previous = null, loaded = null;
     trials.forEach(function (trial) {
+      if (trial.kind === "attention_check") { timeline.push(attentionCheck(trial)); return; }
       if (trial.block !== loaded) { timeline.push(preload(trials, trial.block)); loaded = trial.block; }
       var part = trial.block + ":" + trial.kind;
       if (part !== previous) {
@@ -357,10 +390,6 @@
       if (trial.kind === "familiarization") { timeline.push(familiarization(trial)); }
       else if (cfg.response.type === "ranking") { timeline = timeline.concat(ranking(trial)); }
       else { timeline.push(scored(trial)); }
-      if (trial.kind === "test") {
-        tests += 1;
-        if (every && tests % every === 0 && tests < nTests) { timeline.push(attentionCheck()); }
-      }
     });
     timeline.push(screen("<p>" + cfg.text.end + "</p>", cfg.text.finish, { data: { end: 1 } }));
     return timeline;

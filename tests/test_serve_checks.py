@@ -1,0 +1,182 @@
+"""Attention checks in ``shapemotion serve``: the checks are items of each served list (where the static
+page puts them), stored, validated and resumed by position like the design's trials, and exported as
+the static runtime writes them, so ``analyze`` reports and excludes alike.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+
+import httpx
+import pandas as pd
+import pytest
+
+from stimuli.serve.study import load_study
+from test_serve import ADMIN, PROTOCOL, answer, free_port, make_design, snapshot, start, start_server
+from test_survey_browser import ARGS, CHROMIUM, make_clips
+
+pytestmark = pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
+CHECKS = "attention_checks: {every: 2, answer: ' medium', exclude_if_failed: 1}\n"
+MEDIUM, HEAVY = 1, 2      # button indexes of the 3-point scale (Light, Medium, Heavy)
+
+
+@pytest.fixture
+def served(tmp_path):
+    from starlette.testclient import TestClient
+
+    from stimuli.serve.app import create_app
+    from stimuli.serve.db import Database
+
+    design = make_design(tmp_path / "design", PROTOCOL + CHECKS)
+    study = load_study(design)
+    db = Database(design / "shapemotion-serve.db", study.fingerprint)
+    client = TestClient(create_app(study, db, ADMIN, expire_s=600))
+    client.study, client.db, client.design = study, db, design
+    yield client
+    db.close()
+
+
+def test_each_list_has_a_check_after_every_second_test_trial(served):
+    trials = pd.read_csv(served.design / "trials.csv", dtype=str)
+    for number, entry in served.study.lists.items():
+        kinds = [t["kind"] for t in entry["trials"]]
+        assert kinds == ["test", "test", "attention_check", "test", "test"]      # none after the last
+        assert [t["index"] for t in entry["trials"]] == list(range(5))
+        design = trials.loc[trials["participant"] == str(number), "stimulus_id"].tolist()
+        assert [t["id"] for t in entry["trials"] if "id" in t] == design            # the design's order kept
+    assert served.study.config["attention"]["answer"] == "Medium"
+    # a protocol without checks serves the lists it served before (its databases stay valid)
+    plain = load_study(make_design(served.design.parent / "plain"))
+    assert all("attention_check" not in [t["kind"] for t in e["trials"]] for e in plain.lists.values())
+
+
+def test_a_check_answer_is_stored_once_validated_and_resumed(served):
+    s = start(served, participant="p1")
+    answer(served, s, 0, HEAVY)
+    answer(served, s, 1, HEAVY)
+    before = snapshot(served.db)
+    assert answer(served, s, 2, 3).status_code == 422           # not a button of the check
+    assert answer(served, s, 3, HEAVY).status_code == 409       # the check comes first
+    assert snapshot(served.db) == before
+    assert answer(served, s, 2, HEAVY).json() == {"stored": True, "next": 3}
+    assert answer(served, s, 2, HEAVY).json() == {"stored": False, "next": 3}     # a retry
+    assert answer(served, s, 2, MEDIUM).status_code == 409                       # a changed answer
+    back = start(served, participant="p1")                                        # a reload
+    assert back["next"] == 3 and [t["kind"] for t in back["trials"]] == ["test", "test"]
+    row = served.db.answer(s["session"], 2)
+    assert row | {"session": "", "participant": ""} == {
+        "rt": 800, "trial_type": "html-button-response", "trial_index": 2, "participant": "", "session": "",
+        "list": 1, "SEX": "M", "protocol": "serve_tiny", "attention_check": 1, "attention_answer": "Medium",
+        "response": HEAVY, "response_label": "Heavy", "attention_passed": 0}
+
+
+def complete(client, state: dict, check: int) -> None:
+    for trial in state["trials"]:
+        response = check if trial["kind"] == "attention_check" else (HEAVY if "Hi1" in trial["id"] else 0)
+        assert answer(client, state, trial["index"], response).status_code == 200
+    client.post(f"/api/sessions/{state['session']}/finish", json={},
+                headers={"X-Session-Token": state["token"]}).raise_for_status()
+
+
+def test_analyze_on_the_export_reports_and_excludes_a_failed_check(served, tmp_path, run_cli):
+    for n in range(1, 7):
+        complete(served, start(served, participant=f"p{n}"), HEAVY if n == 2 else MEDIUM)
+    code, out, err = run_cli("serve", "export", served.design, "--out", tmp_path / "r.csv")
+    assert code == 0, err
+    rows = pd.read_csv(tmp_path / "r.csv", dtype=str, keep_default_na=False)
+    assert (rows["attention_check"] == "1").sum() == 6
+    code, out, err = run_cli("analyze", served.design, "--responses", tmp_path / "r.csv", "--out",
+                             tmp_path / "report", "--no-models")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())["import"]
+    assert summary["attention_checks"] == [{"participant": f"p{n}", "checks": 1, "failed": int(n == 2)}
+                                           for n in range(1, 7)]
+    assert summary["participants"] == 5 and summary["excluded_by_reason"]["failed attention checks"] == 4
+    assert not summary["columns_not_imported"]
+
+
+# -- in Chromium: one participant passes the check, one fails it and reloads the page right after -----
+
+def click_through(page, url: str, attentive: bool, reload_after_check: bool) -> None:
+    """'Heavy' on every clip; on the check 'Medium' when attentive, else 'Heavy'; reload once if asked."""
+    page.goto(url)
+    reloaded = False
+    while not page.evaluate("window.SHAPEMOTION_STATUS && window.SHAPEMOTION_STATUS.done"):
+        page.wait_for_selector("#jspsych-video-button-response-stimulus, #jspsych-html-button-response-stimulus,"
+                               " #jspsych-content p")
+        if page.query_selector("#jspsych-video-button-response-stimulus"):
+            page.wait_for_function("() => { const b = document.querySelector('#jspsych-video-button-response-"
+                                   "btngroup button'); return b !== null && !b.disabled; }", timeout=20_000)
+            page.get_by_role("button", name="Heavy").click()
+        elif page.query_selector("#jspsych-html-button-response-stimulus") and "please select" in \
+                page.inner_text("#jspsych-html-button-response-stimulus"):
+            saved = page.evaluate("window.SHAPEMOTION_STATUS.saved")
+            page.get_by_role("button", name="Medium" if attentive else "Heavy").click()
+            if reload_after_check and not reloaded:
+                page.wait_for_function(f"() => window.SHAPEMOTION_STATUS.saved > {saved}", timeout=20_000)
+                page.reload()
+                reloaded = True
+        elif page.query_selector("#jspsych-html-button-response-btngroup button"):
+            page.click("#jspsych-html-button-response-btngroup button")
+        page.wait_for_timeout(30)
+
+
+def test_served_page_shows_stores_and_resumes_the_checks(tmp_path, run_cli):
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed (make setup installs it)")
+    from playwright.sync_api import sync_playwright
+
+    design = make_design(tmp_path / "design", PROTOCOL + CHECKS)
+    make_clips(design, seconds=0.5)
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = start_server(design, port)
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+            statuses, frames = [], []
+            for n, attentive in ((1, True), (2, False)):
+                context = browser.new_context()
+                page = context.new_page()
+                click_through(page, f"{url}/?participant=web{n}&redirect=0", attentive, reload_after_check=n == 2)
+                statuses.append(page.evaluate("window.SHAPEMOTION_STATUS"))
+                frames.append(pd.read_csv(io.StringIO(page.evaluate("window.SHAPEMOTION_DATA()")), dtype=str,
+                                          keep_default_na=False))
+                context.close()
+            browser.close()
+        for n in range(3, 7):        # four more participants through the API, all attentive (for the ANOVA)
+            state = httpx.post(f"{url}/api/sessions", json={"params": {"participant": f"api{n}"}}).json()
+            for trial in state["trials"]:
+                response = MEDIUM if trial["kind"] == "attention_check" else (HEAVY if "Hi1" in trial["id"] else 0)
+                httpx.post(f"{url}/api/sessions/{state['session']}/trials", headers={"X-Session-Token": state["token"]},
+                           json={"index": trial["index"], "response": response, "rt": 900}).raise_for_status()
+            httpx.post(f"{url}/api/sessions/{state['session']}/finish", headers={"X-Session-Token": state["token"]},
+                       json={}).raise_for_status()
+        limits = httpx.get(f"{url}/admin/limits", headers={"Authorization": f"Bearer {ADMIN}"}).json()
+    finally:
+        proc.kill()
+        proc.wait(10)
+    assert all(s["errors"] == [] and s["limited"] == 0 for s in statuses)
+    assert sum(limits["refused"].values()) == 0                # a normal run never meets the rate limit
+    # the page showed the check where the static page does: right after the second test trial
+    first = frames[0][frames[0]["trial_type"].isin(["video-button-response"]) | (frames[0]["attention_check"] == "1")]
+    assert first["attention_check"].tolist() == ["", "", "1", "", ""]
+    code, out, err = run_cli("serve", "export", design, "--out", tmp_path / "r.csv")
+    assert code == 0, err
+    rows = pd.read_csv(tmp_path / "r.csv", dtype=str, keep_default_na=False)
+    answers = rows[rows["end"] != "1"]
+    assert not answers.duplicated(["participant", "trial_index"]).any()          # each answer once
+    checks = answers[answers["attention_check"] == "1"].set_index("participant")
+    assert checks.loc[["web1", "web2"], "response_label"].tolist() == ["Medium", "Heavy"]   # kept over the reload
+    assert checks.loc[["web1", "web2"], "attention_passed"].tolist() == ["1", "0"]
+    assert answers.groupby("participant").size().tolist() == [5] * 6
+    code, out, err = run_cli("analyze", design, "--responses", tmp_path / "r.csv", "--out", tmp_path / "report",
+                             "--no-models")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())["import"]
+    assert {c["participant"]: c["failed"] for c in summary["attention_checks"]} == {
+        "web1": 0, "web2": 1, "api3": 0, "api4": 0, "api5": 0, "api6": 0}
+    exclusions = pd.read_csv(tmp_path / "report" / "exclusions.csv", dtype=str)
+    failed = exclusions[exclusions["reason"] == "failed attention checks"]
+    assert set(failed["participant"]) == {"web2"} and len(failed) == 4
