@@ -17,7 +17,7 @@ import textwrap
 from analysis.errors import AnalysisError
 from stimuli.errors import StimuliError
 
-# Modules that add commands, in the order `--help` lists them.
+# Modules that add commands (`--help` lists the commands by STAGES below).
 COMMAND_MODULES = [
     "stimuli.commands.init_cmd",
     "stimuli.commands.schema_cmd",
@@ -33,16 +33,72 @@ COMMAND_MODULES = [
 ]
 
 
+# What `shapemotion --help` lists: the commands in the order of the data flow, by stage, each with a
+# one-line example (tests/test_cli.py parses every example and checks that every command is here).
+STAGES = {
+    "design the study": {
+        "init": "shapemotion init mystudy",
+        "schema": "shapemotion schema > protocol.schema.json",
+        "validate": "shapemotion validate mystudy/protocol.yaml",
+        "design": "shapemotion design mystudy/protocol.yaml --out mystudy/design",
+    },
+    "make the stimuli": {
+        "bodies": "shapemotion bodies mystudy/protocol.yaml --out mystudy/bodies",
+        "motion": "shapemotion motion import captures/walk.bvh --loop --gait walk --out walk.npz",
+        "physics": "shapemotion physics protocol protocols/exp2_com_vs_average.yaml --out physics",
+        "render": "shapemotion render mystudy/protocol.yaml --out mystudy/out --quick",
+        "preview": "shapemotion preview --gait walk --body sex=F,height=1.65,bmi=21 --out clip.mp4",
+    },
+    "run the study": {
+        "survey": "shapemotion survey mystudy/out --format jspsych --out mystudy/site",
+        "serve": "shapemotion serve mystudy/out --port 8000",
+    },
+    "analyse the answers": {
+        "simulate": "shapemotion simulate mystudy/out --participants 8 --seed 1 --out responses.csv",
+        "power": "shapemotion power mystudy/out --participants 8 16 24 --sims 200",
+        "responses": "shapemotion responses inspect export.csv --design mystudy/out",
+        "analyze": "shapemotion analyze mystudy/out --responses responses.csv --out mystudy/report",
+        "anova": "shapemotion anova data.csv --dv rating --subject participant --within BODY MOTION --between SEX",
+    },
+    "all at once": {
+        "demo": "shapemotion demo --quick",
+    },
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="shapemotion",
         description="Stimulus generator and analysis suite for perception experiments on body shape and motion.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version="shapemotion 0.1.0")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND",
+                                       help="one of the commands below; shapemotion COMMAND --help for its options")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
+    parser.epilog = command_overview(subparsers)
+    # argparse would list the commands again, in the order the modules added them: the overview replaces it
+    subparsers._choices_actions.clear()
     return parser
+
+
+def command_overview(subparsers) -> str:
+    """The commands by stage of the data flow, each with its help line and an example; a command no
+    stage names comes last, so that none is hidden."""
+    helps = {action.dest: action.help or "" for action in subparsers._choices_actions}
+    placed = {name for commands in STAGES.values() for name in commands}
+    stages = {**STAGES, "other": {name: "" for name in helps if name not in placed}}
+    lines = ["commands, in the order of the data flow:"]
+    for stage, commands in stages.items():
+        present = [name for name in commands if name in helps]
+        if present:
+            lines += ["", f"{stage}:"]
+        for name in present:
+            lines += textwrap.wrap(helps[name], width=98, initial_indent=f"  {name:<10} ", subsequent_indent=" " * 13)
+            if commands[name]:
+                lines.append(f"{'':13}e.g. {commands[name]}")
+    return "\n".join(lines)
 
 
 def print_user_error(exc: Exception) -> None:

@@ -56,3 +56,26 @@ def test_demo_runs_the_whole_chain(tmp_path, run_cli):
         assert (tmp_path / name / "trials.csv").stat().st_size > 0
         assert (tmp_path / name / "survey" / "survey.qsf").is_file()
         assert "<table" in (tmp_path / name / "results" / "report" / "report.html").read_text()
+
+
+def test_help_lists_every_command_by_stage_with_an_example_that_parses():
+    """``shapemotion --help`` lists the commands in the order of the data flow, each with an example;
+    every example is a valid command line (parsed, not run)."""
+    import shlex
+
+    from stimuli.cli import STAGES
+
+    parser = build_parser()
+    overview = parser.format_help()
+    commands = [name for stage in STAGES.values() for name in stage]
+    assert sorted(commands) == sorted({c[0] for c in subcommands(parser)}), "place every command in cli.STAGES"
+    assert "\nother:" not in overview
+    listed = [line.split()[0] for line in overview.split("commands, in the order of the data flow:")[1].splitlines()
+              if line.startswith("  ") and not line.startswith("   ")]
+    assert listed == commands and commands[:3] == ["init", "schema", "validate"]
+    for stage in STAGES.values():
+        for name, example in stage.items():
+            assert f"e.g. {example}" in overview
+            words = shlex.split(example.split(" > ")[0])
+            assert words[:2] == ["shapemotion", name]
+            assert build_parser().parse_args(words[1:]).func
