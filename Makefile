@@ -7,7 +7,7 @@ STAMP := $(VENV)/.setup-done
 APT_PACKAGES := libegl1 libgl1 libosmesa6 chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: setup test test-fast demo bench clean
+.PHONY: setup test test-fast demo bench docs clean
 
 setup: $(STAMP)
 
@@ -31,8 +31,13 @@ test-fast: setup
 demo: setup
 	$(VENV)/bin/shapemotion demo --out demo_output
 
+# The documentation site (mkdocs.yml) into site/; --strict turns any warning (a broken link or
+# anchor, a page missing from the nav) into a failure. tests/test_docs.py runs the same build.
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
 bench: setup
 	@for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) demo_output .cache build *.egg-info
+	rm -rf $(VENV) demo_output .cache build site *.egg-info
