@@ -16,25 +16,40 @@ CLI_MARKER = "<!-- generated: cli -->"
 FIELDS_MARKER = "<!-- generated: protocol-fields -->"
 
 
+def _subparsers(parser: argparse.ArgumentParser) -> argparse._SubParsersAction | None:
+    return next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+
+
 def _subcommands(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:
-    """The parser's sub-commands in the order its ``--help`` lists them."""
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return list(action.choices.items())
-    return []
+    """The parser's sub-commands in the order they were added."""
+    action = _subparsers(parser)
+    return list(action.choices.items()) if action else []
+
+
+def _help_block(parser: argparse.ArgumentParser) -> list[str]:
+    return ["```text", parser.format_help().rstrip(), "```", ""]
 
 
 def cli_reference_markdown() -> str:
-    """One section per command (and per sub-command) holding its ``--help`` text."""
-    from stimuli.cli import build_parser
+    """``shapemotion --help`` (the commands by stage of the data flow, each with an example), then one
+    section per stage and command (and sub-command) with the command's own ``--help`` text."""
+    from stimuli.cli import STAGES, build_parser
 
-    os.environ["COLUMNS"] = "100"   # argparse wraps at the terminal width; fix it so builds are reproducible
+    os.environ["COLUMNS"] = "88"   # argparse wraps at the terminal width; fix it so builds are reproducible
     parser = build_parser()
-    parts = ["```text", parser.format_help().rstrip(), "```"]
-    for name, sub in _subcommands(parser):
-        parts += [f"## `shapemotion {name}`", "", "```text", sub.format_help().rstrip(), "```", ""]
-        for child, subsub in _subcommands(sub):
-            parts += [f"### `shapemotion {name} {child}`", "", "```text", subsub.format_help().rstrip(), "```", ""]
+    commands = dict(_subcommands(parser))
+    placed = {name for examples in STAGES.values() for name in examples}
+    stages = {**STAGES, "other commands": {name: "" for name in commands if name not in placed}}
+    parts = ["## `shapemotion --help`", "", *_help_block(parser)]
+    for stage, examples in stages.items():
+        if examples:
+            parts += [f"## {stage[0].upper()}{stage[1:]}", ""]
+        for name, example in examples.items():
+            parts += [f"### `shapemotion {name}`", ""]
+            parts += [f"Example: `{example}`", ""] if example else []
+            parts += _help_block(commands[name])
+            for child, sub in _subcommands(commands[name]):
+                parts += [f"#### `shapemotion {name} {child}`", "", *_help_block(sub)]
     return "\n".join(parts)
 
 

@@ -55,9 +55,28 @@ def test_protocol_fields_come_from_the_models(site):
 
 
 def test_api_reference_is_rendered_from_docstrings(site):
+    import shapemotion
+
     html = (site / "reference" / "api.html").read_text()
-    assert "analysis.anova.anova" in html and "Split-plot ANOVA" in html
     assert ":::" not in html   # every mkdocstrings directive resolved
+    assert "analysis.anova.anova" in html and "Split-plot ANOVA" in html
+    for name in shapemotion.__all__:
+        assert f'id="shapemotion.api.{name}"' in html, name
+    # doctest examples are code blocks, not Markdown (where '>>>' would be nested quotes)
+    assert "<blockquote>" not in html and "&gt;&gt;&gt;" in html
+
+
+def test_doc_hooks_examples_run():
+    import doctest
+    import importlib.util
+
+    for name in ["hooks", "hooks_griffe"]:
+        spec = importlib.util.spec_from_file_location(name, ROOT / "docs" / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        result = doctest.testmod(module)
+        assert result.failed == 0, name
+    assert result.attempted >= 1
 
 
 def test_readme_is_two_screens_with_working_links():
