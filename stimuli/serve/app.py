@@ -36,7 +36,7 @@ from starlette.routing import Route
 from stimuli.serve.assign import candidate_lists, least_filled
 from stimuli.serve.db import Database
 from stimuli.serve.export import export_csv
-from stimuli.serve.limits import BURST, RATE, RateLimiter
+from stimuli.serve.limits import BURST, MAX_KEYS, RATE, RateLimiter
 from stimuli.serve.study import Study, check_answer, check_rt, export_row
 from stimuli.survey import jspsych
 
@@ -73,7 +73,7 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
     between = study.source.between
     limiter = RateLimiter(rate, burst) if rate else None
     limited = dict.fromkeys(LIMITED_ROUTES, 0)     # 429s since the server started, by route
-    limited_sessions: dict[str, int] = {}         # … and by session (existing sessions only)
+    limited_sessions: dict[str, int] = {}         # … and by session id (progress counts the real ones)
 
     # -- helpers ----------------------------------------------------------------------------------
     def state(session: dict) -> dict:
@@ -100,17 +100,17 @@ def create_app(study: Study, db: Database, admin_token: str, expire_s: float = 3
     def limit(request: Request, route: str) -> None:
         """Refuse (429, Retry-After) a request over its client's rate, before anything is read or stored.
 
-        The key is the client's address and the session the request is for; starting a session, and a
-        request for no known session, count against the address alone.
+        The key is the client's address and the session id the request names (not looked up: the limit
+        comes before the database); starting a session counts against the address alone.
         """
         if limiter is None:
             return
         sid = request.path_params.get("sid", "")
-        known = bool(SESSION_ID.fullmatch(sid)) and db.session(sid) is not None
-        wait = limiter.take((request.client.host if request.client else "", sid if known else route), clock())
+        sid = sid if SESSION_ID.fullmatch(sid) else ""
+        wait = limiter.take((request.client.host if request.client else "", sid or route), clock())
         if wait:
             limited[route] += 1
-            if known:
+            if sid and (sid in limited_sessions or len(limited_sessions) < MAX_KEYS):   # made-up ids: bounded
                 limited_sessions[sid] = limited_sessions.get(sid, 0) + 1
             raise Refused(429, f"{route}: too many requests from this client; retry after {math.ceil(wait)} s",
                           headers={"Retry-After": str(math.ceil(wait))})
