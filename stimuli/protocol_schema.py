@@ -34,6 +34,9 @@ def protocol_schema() -> dict:
     """
     schema = Protocol.model_json_schema()
     _plain_descriptions(schema)
+    for model in [schema, *schema["$defs"].values()]:
+        for spec in model["properties"].values():
+            spec.pop("title", None)   # pydantic's "Height M" from height_m: the field's name says it better
     return {"$schema": SCHEMA_DIALECT, "title": "shapemotion protocol",
             **{k: v for k, v in schema.items() if k != "title"}}
 
