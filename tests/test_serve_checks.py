@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+from pathlib import Path
 
 import httpx
 import pandas as pd
@@ -55,6 +56,8 @@ def test_a_check_answer_is_stored_once_validated_and_resumed(served):
     s = start(served, participant="p1")
     answer(served, s, 0, HEAVY)
     answer(served, s, 1, HEAVY)
+    # a reload on the check's screen resumes at the check
+    assert start(served, participant="p1")["trials"][0] == {"kind": "attention_check", "block": 1, "index": 2}
     before = snapshot(served.db)
     assert answer(served, s, 2, 3).status_code == 422           # not a button of the check
     assert answer(served, s, 3, HEAVY).status_code == 409       # the check comes first
@@ -180,3 +183,47 @@ def test_served_page_shows_stores_and_resumes_the_checks(tmp_path, run_cli):
     exclusions = pd.read_csv(tmp_path / "report" / "exclusions.csv", dtype=str)
     failed = exclusions[exclusions["reason"] == "failed attention checks"]
     assert set(failed["participant"]) == {"web2"} and len(failed) == 4
+
+
+def test_the_static_page_and_the_server_place_the_checks_alike(tmp_path):
+    """Exp. 2 (nested blocks, familiarisation, practice, 2AFC) with a check every 5th test trial: the static
+    page (jsPsych's data-only simulation) shows each check between the same clips as the served list."""
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed (make setup installs it)")
+    from playwright.sync_api import sync_playwright
+
+    from stimuli.design import build_design, write_design
+    from stimuli.protocol import parse_protocol
+    from stimuli.serve.study import with_checks
+    from stimuli.survey import export_survey
+    from stimuli.survey.jspsych import config
+    from stimuli.survey.source import load_source
+    from stimuli.survey.text import answer_labels
+    from test_survey_browser import DONE, Server
+
+    text = (Path(__file__).resolve().parents[1] / "protocols" / "exp2_com_vs_average.yaml").read_text()
+    first = answer_labels(parse_protocol(text))[0]
+    design = tmp_path / "design"
+    write_design(build_design(parse_protocol(text + f"attention_checks: {{every: 5, answer: '{first}'}}\n"), 3), design)
+    export_survey(design, "jspsych", tmp_path / "site", video_base_url="https://media.example.org/exp2")
+    cfg = config(load_source(design))
+    server = Server(tmp_path / "site")
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+            page = browser.new_page()
+            shown = {}
+            for n in (1, 2, 3):
+                page.goto(f"{server.url}/index.html?participant={n}&simulate=data-only&save=0")
+                page.wait_for_function(DONE, timeout=60_000)
+                data = pd.read_csv(io.StringIO(page.evaluate("window.SHAPEMOTION_CSV")), dtype=str,
+                                   keep_default_na=False)
+                data = data[(data["clip_id"] != "") | (data["attention_check"] == "1")]
+                shown[n] = [c or "check" for c in data["clip_id"]]
+            browser.close()
+    finally:
+        server.close()
+    for entry in cfg["lists"]:
+        served = [t.get("id", "check") for t in with_checks(entry["trials"], cfg["attention"])]
+        assert shown[entry["list"]] == served
+        assert served.count("check") == (sum(t["kind"] == "test" for t in entry["trials"]) - 1) // 5 > 0
