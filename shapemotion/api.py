@@ -61,7 +61,7 @@ def init(folder: PathLike, source: PathLike | None = None, force: bool = False) 
 
 
 def schema() -> dict:
-    """``shapemotion schema``: the protocol's JSON Schema (draft 2020-12), a description on every field.
+    """``shapemotion schema``: the protocol's JSON Schema (draft-07), a description on every field.
 
     >>> schema()["properties"]["participants"]["description"]
     'number of participants; a multiple of the number of between groups'

@@ -21,20 +21,23 @@ import re
 
 from stimuli.protocol import Protocol
 
-SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+# Draft-07: what editors' YAML support (yaml-language-server, on vscode-json-languageservice) implements;
+# the schema uses nothing newer, and its parts sit under draft-07's "definitions".
+SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
 SCHEMA_FILE = "protocol.schema.json"   # the name protocols refer to, next to them
 SCHEMA_LINE = f"# yaml-language-server: $schema={SCHEMA_FILE}"
 
 
 def protocol_schema() -> dict:
-    """The protocol's JSON Schema (draft 2020-12) with one-line descriptions.
+    """The protocol's JSON Schema (draft-07) with one-line descriptions.
 
-    >>> sorted(protocol_schema()["$defs"])[:3]
+    >>> sorted(protocol_schema()["definitions"])[:3]
     ['Actor', 'Alternatives', 'Analysis']
     """
-    schema = Protocol.model_json_schema()
+    schema = Protocol.model_json_schema(ref_template="#/definitions/{model}")
+    schema["definitions"] = schema.pop("$defs")
     _plain_descriptions(schema)
-    for model in [schema, *schema["$defs"].values()]:
+    for model in [schema, *schema["definitions"].values()]:
         for spec in model["properties"].values():
             spec.pop("title", None)   # pydantic's "Height M" from height_m: the field's name says it better
     return {"$schema": SCHEMA_DIALECT, "title": "shapemotion protocol",
@@ -88,7 +91,7 @@ def field_reference_markdown(heading_level: int = 1) -> str:
     True
     """
     schema = protocol_schema()
-    defs = schema["$defs"]
+    defs = schema["definitions"]
     hashes = "#" * heading_level
     lines = [f"{hashes} Protocol field reference", "",
              "Generated from the protocol's models (`shapemotion schema --markdown`); the JSON Schema "
@@ -136,7 +139,7 @@ def type_text(spec: dict) -> str:
 
     >>> type_text({"anyOf": [{"type": "integer", "minimum": 1}, {"type": "null"}]})
     'integer, ≥ 1 or null'
-    >>> type_text({"type": "object", "additionalProperties": {"$ref": "#/$defs/GaitSpec"}})
+    >>> type_text({"type": "object", "additionalProperties": {"$ref": "#/definitions/GaitSpec"}})
     'mapping of name → GaitSpec'
     """
     if "$ref" in spec:
@@ -198,11 +201,11 @@ def _cell(text: str) -> str:
 
 
 def _refs(node) -> list[str]:
-    """The ``$defs`` a schema node refers to, in the order they appear."""
+    """The ``definitions`` a schema node refers to, in the order they appear."""
     found: list[str] = []
     if isinstance(node, dict):
         for key, value in node.items():
-            if key == "$defs":   # the top level's definitions: followed through the refs instead
+            if key == "definitions":   # the top level's parts: followed through the refs instead
                 continue
             if key == "$ref":
                 found.append(value.rsplit("/", 1)[-1])
