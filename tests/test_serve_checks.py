@@ -227,3 +227,37 @@ def test_the_static_page_and_the_server_place_the_checks_alike(tmp_path):
         served = [t.get("id", "check") for t in with_checks(entry["trials"], cfg["attention"])]
         assert shown[entry["list"]] == served
         assert served.count("check") == (sum(t["kind"] == "test" for t in entry["trials"]) - 1) // 5 > 0
+
+
+def test_a_ranking_study_with_checks_is_served_and_scored(tmp_path):
+    """Ranking answers with every label; its check with one label's button, as on the static page."""
+    from starlette.testclient import TestClient
+
+    from analysis.io_design import load_design
+    from analysis.responses import import_responses
+    from stimuli.serve.app import create_app
+    from stimuli.serve.db import Database
+    from test_report import RANKING_PROTOCOL
+
+    design = make_design(tmp_path / "design", RANKING_PROTOCOL + "attention_checks: {every: 1, answer: B}\n")
+    study = load_study(design)
+    db = Database(design / "shapemotion-serve.db", study.fingerprint)
+    client = TestClient(create_app(study, db, ADMIN))
+    try:
+        for n in range(8):
+            s = start(client, participant=f"r{n}")
+            assert [t["kind"] for t in s["trials"]] == ["test", "attention_check", "test"]
+            for t in s["trials"]:
+                given = (2 if n == 0 else 1) if t["kind"] == "attention_check" else ["C", "A", "B"]
+                assert answer(client, s, t["index"], given).status_code == 200
+            assert answer(client, s, 1, ["A", "B", "C"]).status_code == 422       # a check is answered by index
+            client.post(f"/api/sessions/{s['session']}/finish", json={},
+                        headers={"X-Session-Token": s["token"]}).raise_for_status()
+        export = client.get("/admin/export.csv", headers={"Authorization": f"Bearer {ADMIN}"})
+        (tmp_path / "r.csv").write_text(export.text)
+    finally:
+        db.close()
+    result = import_responses(tmp_path / "r.csv", load_design(design))
+    assert result.reconciles and not result.summary()["columns_not_imported"]
+    assert [c["failed"] for c in result.summary()["attention_checks"]] == [1] + [0] * 7
+    assert result.data["participant"].nunique() == 8          # no exclude_if_failed: reported only
