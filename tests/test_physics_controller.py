@@ -208,3 +208,68 @@ def test_fig7_jog_baselines_say_no_running_norm_is_bundled(tmp_path):
     walk = plot_fig7(curves, tmp_path / "walk", gait="walk")[1].read_text()
     assert "no running norm bundled" in jog and "CGM2.3 normative" not in jog
     assert "CGM2.3 normative" in walk and "no running norm" not in walk
+
+
+def _small_walk_protocol(tmp_path):
+    """Exp 2 cut to the walk and two actors per sex, with one generated NoCOM walk per sex on its own
+    body in ``tmp/nocom`` (``--motions``); returns (protocol path, NoCOM folder)."""
+    from pathlib import Path
+
+    import yaml
+
+    from stimuli.motion.generate import GaitParams, generate
+
+    root = Path(__file__).resolve().parents[1]
+    data = yaml.safe_load((root / "protocols" / "exp2_com_vs_average.yaml").read_text())
+    data["actors"] = [a for a in data["actors"] if a["id"] in ("F_Hi1", "F_Lo2", "M_Hi1", "M_Lo2")]
+    data["factors"] = [f for f in data["factors"] if f["name"] != "GAIT"]
+    for factor in data["factors"]:
+        if factor["name"] == "BODY":
+            factor.update(levels=["Hi1", "Lo2"], abbreviations={"Hi1": "H1", "Lo2": "L2"})
+    data.update(gaits={"walk": data["gaits"]["walk"]}, blocks={"by": ["SEX"], "order": "counterbalanced"})
+    for key in ("practice", "familiarization"):
+        data.pop(key)
+    path = tmp_path / "exp2_walk.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    for sex, height, bmi in (("F", 1.61, 24.4), ("M", 1.80, 26.0)):
+        walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=height, fps=30, cycles=2)
+        walk.metadata.update(sex=sex, height_m=height, bmi=bmi)
+        walk.save(tmp_path / "nocom" / f"{sex}_walk.npz")
+    return path, tmp_path / "nocom"
+
+
+@pytest.mark.slow   # two gain choices and four 4-s simulations in two worker processes
+def test_protocol_step_with_feedforward_chooses_gains_once_per_motion_and_caches_them(tmp_path, monkeypatch):
+    # Issue 21: with the feed-forward the protocol step chooses the gains of each NoCOM motion on its
+    # reference body (tune_for_motion) and keeps them for every actor of that motion; a second run
+    # reads the choice and the COM motions from the cache.
+    import json
+
+    from stimuli.physics import protocol_step
+    from stimuli.physics.controller import Gains
+
+    monkeypatch.setattr(protocol_step, "cache_dir", lambda: tmp_path / "cache" / "physics")
+    # the code digest of the cache key, fixed: other work on the tree between the two runs is no change here
+    monkeypatch.setattr(protocol_step, "source_digest", lambda *folders: "this code")
+    path, motions = _small_walk_protocol(tmp_path)
+    lines = []
+    result = protocol_step.run_protocol(path, tmp_path / "out", motions_dir=motions, feedforward=True,
+                                        progress=lines.append)
+    assert "gains to choose for 2 NoCOM motion(s) first" in lines[0]
+    choices = sorted((tmp_path / "cache" / "physics").glob("gains_*.json"))
+    assert len(choices) == 2
+    shipped = Gains.load(gait="walk")
+    for r in result["reports"]:
+        assert r["controller"]["feedforward"] and not r["fell"]
+        chosen = r["gain_choice"]
+        assert chosen["history"][0]["scale"] == 1.0 and chosen["scale"] in [h["scale"] for h in chosen["history"]]
+        assert r["gains"]["k_p"] == pytest.approx(shipped.k_p * chosen["scale"])
+    by_sex = {}
+    for r in result["reports"]:   # one choice per NoCOM motion, the same for every actor of it
+        by_sex.setdefault(r["body"]["sex"], set()).add(json.dumps(r["gain_choice"], sort_keys=True))
+    assert {sex: len(v) for sex, v in by_sex.items()} == {"F": 1, "M": 1}
+    lines.clear()
+    again = protocol_step.run_protocol(path, tmp_path / "again", motions_dir=motions, feedforward=True,
+                                       progress=lines.append)
+    assert lines == ["physics: 0 COM motion(s) to simulate, 4 cached"]
+    assert [r["gain_choice"] for r in again["reports"]] == [r["gain_choice"] for r in result["reports"]]

@@ -7,14 +7,22 @@ belongs to: its metadata ``height_m`` and ``weight_kg`` or ``bmi`` (read as ``ph
 reads them), else the mean height and BMI of the protocol's test actors of that sex, with a warning. Each COM motion is cached under
 ``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the gains file and the code
 that makes it (the body, motion and physics packages), so a second run only copies files.
+
+With the feed-forward controller the gains are chosen once per NoCOM motion on its reference body
+(:func:`stimuli.physics.tune.tune_for_motion`) and then kept for every actor; the choice is cached
+under ``$SHAPEMOTION_CACHE/physics/gains_<key>.json`` keyed as a COM motion is (motion bytes,
+reference body, gains file, code), and the actors' cache keys include the chosen gains.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
 import shutil
+from contextlib import contextmanager
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +105,43 @@ def check_protocol_inputs(protocol, out: Path, motions_dir, workers: int) -> Non
                                    f"(expected <motions>/<sex>_<gait>.npz)")
 
 
+def _tune_job(args: dict) -> dict:
+    """The gains of one NoCOM motion, chosen on its reference body (runs in a worker process)."""
+    from stimuli.bodies import fit_body
+    from stimuli.motion import Motion
+    from stimuli.physics.tune import tune_for_motion
+
+    gains = tune_for_motion(Motion.load(args["motion"]), fit_body(args["sex"], *args["reference"]),
+                            progress=lambda line: None)
+    payload = dataclasses.asdict(gains)
+    atomic_write_text(args["out"], json.dumps(payload, indent=1, sort_keys=True))
+    return payload
+
+
+def _tune_spec(motion_path: Path, sex: str, reference, cache: Path, gains_text: str) -> dict:
+    """The gain choice of one NoCOM motion: its inputs and its cache file (keyed as a COM motion is)."""
+    spec = {"choice": "tune_for_motion", "sex": sex, "reference": list(reference)}
+    return dict(spec, motion=str(motion_path), out=str(cache / f"gains_{_key(motion_path, spec, gains_text)}.json"))
+
+
+def _actor_jobs(protocol, gait: str, sex: str, motion_path: Path, reference, feedforward: bool, cache: Path,
+                gains_text: str):
+    """A function of the chosen gains (None: the shipped set) giving the jobs of every actor of ``sex``."""
+    def make(gains: dict | None) -> list[dict]:
+        jobs = []
+        for actor in (a for a in protocol.actors if a.sex == sex):
+            spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
+                    "girths": actor_girths(actor), "weight_kg": actor.weight_kg, "gait": gait,
+                    "reference": list(reference)}
+            if feedforward:   # only then: the pure-PD cache keys stay those of earlier runs
+                spec.update(feedforward=True, gains=gains)
+            key = _key(motion_path, spec, gains_text)
+            jobs.append(dict(spec, motion=str(motion_path), out_motion=str(cache / f"{key}.npz"),
+                             out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}"))
+        return jobs
+    return make
+
+
 def _key(motion_path: Path, actor: dict, gains_text: str) -> str:
     h = hashlib.sha256()
     h.update(motion_path.read_bytes())
@@ -121,12 +166,17 @@ def _job(args: dict) -> dict:
     from stimuli.physics.analysis_fig7 import gait_curves, reference_heel_strike_s
     from stimuli.physics.retarget import retarget
 
+    from stimuli.physics.controller import Gains
+
     motion = Motion.load(args["motion"])
     body = fit_body(args["sex"], args["height_m"], args["bmi"], **args["girths"])
     ref_body = fit_body(args["sex"], *args["reference"])
-    result = retarget(motion, body, args["weight_kg"], reference_body=ref_body,
+    gains = Gains(**args["gains"]) if args.get("gains") else None
+    result = retarget(motion, body, args["weight_kg"], reference_body=ref_body, gains=gains,
                       feedforward=args.get("feedforward", False))
     report = result.report
+    if gains is not None:   # the per-motion choice: its scale of the gait's set and whether it met the bounds
+        report["gain_choice"] = {k: gains.tuning[k] for k in ("scale", "met", "history")}
     report["actor"] = args["actor"]
     report["gait"] = args["gait"]
     if not result.sim.fell:
@@ -144,12 +194,73 @@ def _job(args: dict) -> dict:
     return report
 
 
+@contextmanager
+def _pool(workers: int, scheduler, progress):
+    """The local process pool, or with ``scheduler`` the Dask cluster behind :class:`_FilesByValue`."""
+    if scheduler is None:
+        with process_pool(workers) as pool:
+            yield pool
+        return
+    from shapemotion.execution import dask_pool
+
+    with dask_pool(scheduler, announce=progress) as pool:
+        yield _FilesByValue(pool)
+
+
+class _FilesByValue:
+    """Physics jobs on a Dask cluster with no shared folder: the NoCOM motion travels as bytes, the job
+    runs in the worker's temporary folder, and the cache files it writes come back and are written
+    here atomically, the report (or gains) last because its presence marks the job done. Each task is
+    keyed by its cache file's name, the job's input hash."""
+
+    OUTPUTS = ("out_motion", "out_report", "out")
+
+    def __init__(self, pool):
+        self.pool = pool
+
+    def submit(self, fn, job: dict):
+        outputs = [k for k in self.OUTPUTS if k in job]
+        key = f"physics-{Path(job[outputs[-1]]).stem}"
+        return self.pool.submit_keyed(key, _on_worker, fn, job, Path(job["motion"]).read_bytes(), outputs,
+                                      then=lambda result: _write_back(job, outputs, *result))
+
+    def map(self, fn, jobs):
+        futures = [self.submit(fn, job) for job in jobs]
+        return (future.result() for future in futures)
+
+
+def _on_worker(fn, job: dict, motion: bytes, outputs: list[str]):
+    """On a Dask worker: ``fn(job)`` with the job's files in a temporary folder; (result, {key: bytes})."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="shapemotion-physics-") as tmp:
+        here = dict(job, motion=str(Path(tmp) / Path(job["motion"]).name))
+        Path(here["motion"]).write_bytes(motion)
+        here |= {k: str(Path(tmp) / Path(job[k]).name) for k in outputs}
+        result = fn(here)
+        return result, {k: Path(here[k]).read_bytes() for k in outputs if Path(here[k]).is_file()}
+
+
+def _write_back(job: dict, outputs: list[str], result, files: dict[str, bytes]):
+    from stimuli.fileio import atomic_write_bytes
+
+    for k in outputs:
+        if k in files:
+            atomic_write_bytes(job[k], files[k])
+    return result
+
+
 def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | Path | None = None,
-                 workers: int = 2, progress=None, feedforward: bool = False) -> dict:
+                 workers: int = 2, progress=None, feedforward: bool = False, scheduler=None) -> dict:
     """Make every COM motion of the protocol under ``out``.
 
     ``feedforward``: the PD plus the inverse-dynamics feed-forward of the NoCOM motion on its
-    reference body (:func:`stimuli.physics.retarget.retarget`); default the paper's pure PD.
+    reference body (:func:`stimuli.physics.retarget.retarget`), with gains chosen once per NoCOM
+    motion on that body (:func:`motion_gains`) and kept for its every actor; default the paper's
+    pure PD with the shipped gains.
+
+    ``scheduler``: a ``shapemotion.execution.Scheduler`` to simulate on a Dask cluster (None: ``workers``
+    local processes); :class:`_FilesByValue` sends each job's files there and back.
 
     Returns ``{"reports": [...], "figures": [...], "warnings": [...]}``; ``progress`` (optional) is
     called with a line per simulated motion.
@@ -175,30 +286,39 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
         (out / folder).mkdir(parents=True, exist_ok=True)
     cache = cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
-    jobs, cached = [], []
-    for gait, sex, motion, reference in nocom:
-        nocom_path = motion.save(out / "nocom" / f"{sex}_{gait}.npz")
-        for actor in (a for a in protocol.actors if a.sex == sex):
-            spec = {"actor": actor.id, "sex": sex, "height_m": actor.height_m, "bmi": actor.bmi,
-                    "girths": actor_girths(actor), "weight_kg": actor.weight_kg, "gait": gait,
-                    "reference": list(reference)}
-            if feedforward:   # only then: the pure-PD cache keys stay those of earlier runs
-                spec["feedforward"] = True
-            key = _key(nocom_path, spec, gains_text)
-            job = dict(spec, motion=str(nocom_path), out_motion=str(cache / f"{key}.npz"),
-                       out_report=str(cache / f"{key}.json"), name=f"COM_{actor.id}_{gait}")
-            (cached if Path(job["out_report"]).is_file() else jobs).append(job)
-    progress(f"physics: {len(jobs)} COM motion(s) to simulate, {len(cached)} cached")
-    if jobs:
-        workers = max(1, min(workers, len(jobs), os.cpu_count() or 1))
+    paths = [motion.save(out / "nocom" / f"{sex}_{gait}.npz") for gait, sex, motion, _ in nocom]
+    actor_jobs = []   # per NoCOM motion: its actors' jobs once its gains are known
+    tunes = []        # feed-forward only: NoCOM motions whose gains must be chosen first
+    for i, (nocom_path, (gait, sex, motion, reference)) in enumerate(zip(paths, nocom)):
+        make = _actor_jobs(protocol, gait, sex, nocom_path, reference, feedforward, cache, gains_text)
+        tune = _tune_spec(nocom_path, sex, reference, cache, gains_text) if feedforward else None
+        if tune and not Path(tune["out"]).is_file():
+            tunes.append((tune, make, i))
+            actor_jobs.append([])
+        else:
+            actor_jobs.append(make(json.loads(Path(tune["out"]).read_text()) if tune else None))
+    todo = [j for jobs in actor_jobs for j in jobs if not Path(j["out_report"]).is_file()]
+    progress(f"physics: {len(todo)} COM motion(s) to simulate, {sum(map(len, actor_jobs)) - len(todo)} cached"
+             + (f"; gains to choose for {len(tunes)} NoCOM motion(s) first" if tunes else ""))
+    if todo or tunes:
+        workers = max(1, min(workers, len(todo) + len(tunes), os.cpu_count() or 1))
         # spawned workers (a fork of a process that has loaded torch/OpenMP can deadlock on its locks)
-        # that die with this process (stimuli.workers)
-        with process_pool(workers) as pool:
-            for job, report in zip(jobs, pool.map(_job, jobs)):
+        # that die with this process (stimuli.workers); the gain choices go first, and each motion's
+        # actors as soon as its gains are known, so the workers never wait for all the choices
+        with _pool(workers, scheduler, progress) as pool:
+            chosen = {pool.submit(_tune_job, tune): (make, i) for tune, make, i in tunes}
+            running = [(job, pool.submit(_job, job)) for job in todo]
+            for done in as_completed(chosen):
+                make, i = chosen[done]
+                actor_jobs[i] = make(done.result())
+                progress(f"  gains for {Path(paths[i]).stem}: × {actor_jobs[i][0]['gains']['tuning']['scale']:g}")
+                running += [(job, pool.submit(_job, job)) for job in actor_jobs[i] if not Path(job["out_report"]).is_file()]
+            for job, future in running:
+                report = future.result()
                 progress(f"  {job['name']}: b {report['b_m'] * 1000:.2f} mm, tracking {report['tracking_rms_deg_overall']:.2f}°, "
                          f"{'FELL' if report['fell'] else 'ok'}")
     reports = []
-    for job in cached + jobs:
+    for job in (j for jobs in actor_jobs for j in jobs):
         report = json.loads(Path(job["out_report"]).read_text())
         shutil.copyfile(job["out_report"], out / "reports" / f"{job['name']}.json")
         com = out / "motions" / f"{job['name']}.npz"
