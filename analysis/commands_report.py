@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from analysis.errors import AnalysisError
+from shapemotion.execution import SCHEDULER_HELP, SCHEDULER_METAVAR
 
 SIMULATE_FORMATS = ["long", "qualtrics", "qualtrics-numeric", "qualtrics-legacy", "jspsych"]
 
@@ -123,6 +124,7 @@ def _register_power(subparsers) -> None:
     p.add_argument("--target", type=float, default=0.8, help="power wanted for --effect (default 0.8)")
     p.add_argument("--csv", metavar="FILE", help="also write the table as CSV")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--scheduler", metavar=SCHEDULER_METAVAR, help=SCHEDULER_HELP + "; each N is one task")
     p.set_defaults(func=run_power)
 
 
@@ -132,11 +134,13 @@ def run_power(args) -> int:
     from analysis.model_spec import load_model
     from analysis.power import check_target, power_sweep, required_participants, required_text
     from analysis.simulate import check_seed, list_reuse_note
+    from shapemotion.execution import errors_as, scheduler_option
     # options first: a bad one must not cost a whole simulation before it is reported
     if args.csv:
         check_output_file(args.csv, "--csv", _inputs(args))
     check_seed(args.seed)
     check_target(args.target)
+    scheduler = scheduler_option(args.scheduler, AnalysisError)
     design = load_design(args.dir)
     model = load_model(args.model, design)
     _note_null_model(args, model, design)
@@ -145,8 +149,9 @@ def run_power(args) -> int:
         print(f"note: {reuse}", file=sys.stderr)
     if args.alpha is not None and not 0 < args.alpha < 1:
         raise AnalysisError(f"--alpha: expected a number between 0 and 1, got {args.alpha}")
-    table = power_sweep(design, model, args.participants, args.sims, args.seed, args.alpha,
-                        progress=sys.stderr.isatty(), correction=args.correction)
+    with errors_as(AnalysisError):
+        table = power_sweep(design, model, args.participants, args.sims, args.seed, args.alpha,
+                            progress=sys.stderr.isatty(), correction=args.correction, scheduler=scheduler)
     answer = text = None
     if args.effect:
         answer = required_participants(table, args.effect, args.target)

@@ -14,6 +14,7 @@ interval. :func:`power_sweep` repeats this over several N and :func:`required_pa
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
 
@@ -157,18 +158,40 @@ def _trials_per_participant(plan: TrialPlan) -> int:
 
 
 def power_sweep(design: DesignInfo, model: GenerativeModel, participants: list[int], sims: int, seed: int,
-                alpha: float | None = None, progress: bool = False, correction: str = "none") -> pd.DataFrame:
-    """:func:`power_analysis` for each N; one row per N × effect, plus data sets per second."""
+                alpha: float | None = None, progress: bool = False, correction: str = "none",
+                scheduler=None) -> pd.DataFrame:
+    """:func:`power_analysis` for each N; one row per N × effect, plus data sets per second.
+
+    ``scheduler`` (a ``shapemotion.execution.Scheduler``): each N is one task on that Dask cluster. Every
+    N draws from its own generator seeded ``[seed, N]``, so the rejections are those of the local run.
+    """
     repeated = sorted({n for n in participants if list(participants).count(n) > 1})
     if repeated:   # one column per N in the table: a repeat would only cost time and break the layout
         raise AnalysisError(f"--participants: N = {', '.join(map(str, repeated))} given more than once; "
                             f"list each number of participants once")
-    frames = []
-    for n in participants:
-        result = power_analysis(design, model, n, sims, seed, alpha, progress, correction)
-        frames.append(result.table.assign(participants=n, datasets_per_second=result.datasets_per_second))
+    if scheduler is None:
+        results = [power_analysis(design, model, n, sims, seed, alpha, progress, correction) for n in participants]
+    else:
+        results = _distributed_results(scheduler, design, model, participants, sims, seed, alpha, correction,
+                                       progress)
+    frames = [r.table.assign(participants=r.participants, datasets_per_second=r.datasets_per_second) for r in results]
     table = pd.concat(frames, ignore_index=True)
     return table[["participants", "effect", "rejections", "sims", "power", "ci_low", "ci_high", "datasets_per_second"]]
+
+
+def _distributed_results(scheduler, design, model, participants, sims, seed, alpha, correction,
+                         progress) -> list[PowerResult]:
+    """:func:`power_analysis` of each N as a Dask task keyed by a hash of its inputs; in ``participants`` order."""
+    from dask.base import tokenize
+
+    from shapemotion.execution import dask_client, run_tasks
+
+    inputs = (str(design.directory), model.model_dump_json(), sims, seed, alpha, correction)
+    tasks = {f"power-N{n}-{tokenize(n, *inputs)}": (design, model, n, sims, seed, alpha, False, correction)
+             for n in participants}
+    with dask_client(scheduler, announce=lambda line: print(line, file=sys.stderr)) as client:
+        done = dict(run_tasks(client, power_analysis, tasks, "power", "N", progress))
+    return [done[key] for key in tasks]
 
 
 def required_participants(sweep: pd.DataFrame, effect: str, target: float = 0.8) -> int | None:

@@ -180,3 +180,45 @@ def run_tasks(client, fn, tasks: dict[str, tuple], desc: str, unit: str, progres
     finally:
         bar.close()
         client.cancel([f for f in futures if not f.done()])
+
+
+@contextmanager
+def dask_pool(scheduler: Scheduler, announce=print):
+    """A :class:`TaskPool` on ``scheduler``, for steps written against ``concurrent.futures``."""
+    with dask_client(scheduler, announce) as client:
+        pool = TaskPool(client)
+        try:
+            yield pool
+        finally:
+            client.cancel([f for f in pool.submitted if not f.done()])
+
+
+class TaskPool:
+    """``submit`` returning ``concurrent.futures.Future`` s that Dask settles: code that waits with
+    ``concurrent.futures.as_completed`` or ``future.result()`` on a process pool works unchanged.
+
+    ``then(result)`` runs on the client as each task finishes (it writes the files a task returned)
+    and its return value is the future's result.
+    """
+
+    def __init__(self, client):
+        self.client = client
+        self.submitted = []
+
+    def submit_keyed(self, key: str, fn, *args, then=None):
+        from concurrent.futures import Future
+
+        future = Future()
+        remote = self.client.submit(fn, *args, key=key, pure=False, retries=RETRIES)
+        remote.add_done_callback(lambda done: _settle(future, done, then))
+        self.submitted.append(remote)
+        return future
+
+
+def _settle(future, done, then) -> None:
+    """Copy a finished Dask future's outcome (through ``then``) into a ``concurrent.futures`` one."""
+    try:
+        result = done.result()
+        future.set_result(then(result) if then else result)
+    except BaseException as exc:   # the task's own error, or the write of its files, reaches whoever waits
+        future.set_exception(exc)

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from shapemotion.execution import SCHEDULER_HELP, SCHEDULER_METAVAR
 from stimuli.commands.checks import in_range
 from stimuli.errors import StimuliError
 from stimuli.fileio import output_path
@@ -45,6 +46,7 @@ def register(subparsers) -> None:
     pr.add_argument("--motions", type=Path, default=None,
                     help="folder with the NoCOM average motions <sex>_<gait>.npz (default: generated walks/jogs)")
     pr.add_argument("--workers", type=int, default=2)
+    pr.add_argument("--scheduler", metavar=SCHEDULER_METAVAR, help=SCHEDULER_HELP)
     pr.set_defaults(func=run_protocol)
     t = sub.add_parser("tune", help="re-find the fixed controller gains on the base character",
                        description="Search the PD gains for the base character and write stimuli/physics/gains.json.")
@@ -207,9 +209,12 @@ def _write_report(path: Path, report: dict) -> None:
 
 
 def run_protocol(args: argparse.Namespace) -> int:
+    from shapemotion.execution import errors_as, scheduler_option
     from stimuli.physics.protocol_step import run_protocol as run
 
-    result = run(args.protocol, args.out, args.motions, workers=args.workers, progress=print)
+    scheduler = scheduler_option(args.scheduler, StimuliError)
+    with errors_as(StimuliError):
+        result = run(args.protocol, args.out, args.motions, workers=args.workers, progress=print, scheduler=scheduler)
     for line in result["warnings"]:
         print(f"warning: {line}", file=sys.stderr)
     print(f"{args.out}: {len(result['reports'])} COM motion(s), figures: "
