@@ -100,6 +100,22 @@ def test_without_a_limit_nothing_is_refused(tmp_path):
     client.db.close()
 
 
+def test_the_per_session_event_cap_is_final_not_a_rate_limit(tmp_path):
+    """Past 200 clip events a session's further events are refused for good: a 429 without Retry-After,
+    which the page records instead of sending again (it resends only a 429 that names a wait)."""
+    client = served_with(tmp_path, rate=0)
+    s = start(client, participant="broken")
+
+    def post():
+        return client.post(f"/api/sessions/{s['session']}/events", headers={"X-Session-Token": s["token"]},
+                           json={"kind": "play_failed", "clip": "clips/x.mp4"})
+
+    assert all(post().status_code == 200 for _ in range(200))
+    last = post()
+    assert last.status_code == 429 and "retry-after" not in last.headers
+    client.db.close()
+
+
 def test_the_bucket_refills_at_its_rate():
     limiter = RateLimiter(rate=2.0, burst=4)
     assert [limiter.take("k", 0.0) for _ in range(5)] == [0.0, 0.0, 0.0, 0.0, 0.5]

@@ -74,11 +74,11 @@
                            body: body === undefined ? undefined : JSON.stringify(body) });
     }
 
-    /** Send until the server answers; a 4xx is final (recorded), a network error or 5xx is retried; a 429
-     * (too many requests) is sent again after its Retry-After without using up a try. */
+    /** Send until the server answers; a 4xx is final (recorded), a network error or 5xx is retried; a rate
+     * limit's 429 (it names a Retry-After) is sent again after that wait without using up a try. */
     function send(path, body, tries) {
       return request("POST", path, body).then(function (r) {
-        if (r.status === 429) { return later(r).then(function () { return send(path, body, tries); }); }
+        if (limitedFor(r)) { return later(r).then(function () { return send(path, body, tries); }); }
         if (r.status >= 500 && tries > 0) { throw new Error("server " + r.status); }
         return r.json().then(function (answer) {
           if (r.status >= 400) { window.SHAPEMOTION_STATUS.errors.push(r.status + " " + answer.error); }
@@ -91,6 +91,9 @@
       });
     }
 
+    /** A 429 of the rate limit: it says when to come back (the per-session cap on clip events is final). */
+    function limitedFor(r) { return r.status === 429 && r.headers.get("Retry-After") !== null; }
+
     /** A promise that resolves once the 429 response's Retry-After (seconds, at least 1) has passed. */
     function later(r) {
       var seconds = Math.max(1, parseInt(r.headers.get("Retry-After"), 10) || 1);
@@ -101,7 +104,7 @@
     /** Starts or resumes the session, again after a 429's Retry-After (other failures are final). */
     function open(body) {
       return request("POST", "api/sessions", body).then(function (r) {
-        if (r.status === 429) { return later(r).then(function () { return open(body); }); }
+        if (limitedFor(r)) { return later(r).then(function () { return open(body); }); }
         return r.json().then(function (answer) {
           if (!r.ok) { throw new Error(answer.error || ("server " + r.status)); }
           return answer;
