@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from shapemotion.execution import SCHEDULER_HELP, SCHEDULER_METAVAR
 from stimuli.errors import StimuliError
 from stimuli.fileio import check_output_dir, check_output_file, output_path
 
@@ -33,6 +34,7 @@ def register(subparsers) -> None:
     p.add_argument("--allow-nearest", action="store_true",
                    help="write the nearest reachable body where a target is out of reach (default: exit 2)")
     p.add_argument("--no-sheet", action="store_true", help="protocol: skip the contact-sheet PNG")
+    p.add_argument("--scheduler", metavar=SCHEDULER_METAVAR, help="protocol: " + SCHEDULER_HELP)
     p.set_defaults(func=run_bodies)
 
 
@@ -60,6 +62,8 @@ def run_bodies(args: argparse.Namespace) -> int:
                                "give a folder name, not a mesh file")
         check_output_dir(args.out)
         return _run_protocol(args)
+    if args.scheduler is not None:
+        raise StimuliError("--scheduler: only for a PROTOCOL's bodies; a single body is one fit, made here")
     missing = [name for name, v in zip(("--sex", "--height", "--bmi"), single) if v is None]
     if missing:
         raise StimuliError(f"a single body needs {', '.join(missing)} (or give a PROTOCOL file)")
@@ -70,8 +74,15 @@ def _run_protocol(args) -> int:
     from stimuli.bodies import fit_protocol_bodies, write_bodies
     from stimuli.protocol import load_protocol
 
+    from shapemotion.execution import errors_as, scheduler_option
+
+    scheduler = scheduler_option(args.scheduler, StimuliError)
     protocol = load_protocol(args.protocol)
-    bodies = fit_protocol_bodies(protocol, allow_nearest=args.allow_nearest, progress=True)
+    if scheduler is None:
+        bodies = fit_protocol_bodies(protocol, allow_nearest=args.allow_nearest, progress=True)
+    else:
+        with errors_as(StimuliError):
+            bodies = _fit_on(scheduler, protocol, args.allow_nearest)
     write_bodies(bodies, args.out, sheet=not args.no_sheet, title=f"{protocol.name}: bodies sorted by BMI")
     for b in bodies:
         a = b.anthropometry
@@ -80,6 +91,48 @@ def _run_protocol(args) -> int:
               f"waist {a.waist_m:.3f} m{flag}")
     print(f"wrote {len(bodies)} bodies to {args.out}")
     return 0
+
+
+def _fit_on(scheduler, protocol, allow_nearest: bool) -> list:
+    """:func:`stimuli.bodies.fit_protocol_bodies` on a Dask cluster: one task per actor, keyed by its body's
+    cache key (one body fitted for two actors of the same targets once); each body fitted comes back and
+    enters this machine's body cache, so later steps here find it."""
+    from shapemotion.execution import dask_client, run_tasks
+    from stimuli.bodies import cache
+
+    keys = {actor.id: _body_cache_key(actor) for actor in protocol.actors}
+    tasks = {f"body-{actor.id}-{keys[actor.id]}": (actor,) for actor in protocol.actors}
+    with dask_client(scheduler) as client:
+        fitted = dict(run_tasks(client, _fit_actor, tasks, "bodies", "body"))
+    bodies = [fitted[key] for key in tasks]
+    for body, key in zip(bodies, keys.values()):
+        if cache.load(key, body.body_id) is None:
+            cache.save(body, key)
+    problems = [b.fit.message for b in bodies if not b.fit.reachable]
+    if problems and not allow_nearest:   # as fit_protocol_bodies says it
+        raise StimuliError(f"protocol {protocol.name}: {len(problems)} actor(s) cannot be built: "
+                           + "; ".join(problems) + " (use --allow-nearest to write the nearest bodies anyway)")
+    return bodies
+
+
+def _fit_actor(actor):
+    """On a Dask worker: an actor's body, the nearest one where its targets are out of reach. The Anny
+    model stays loaded in the worker process between tasks (``stimuli.bodies.backend``'s cache)."""
+    from stimuli.bodies.api import body_for_actor
+
+    return body_for_actor(actor, on_unreachable="nearest")
+
+
+def _body_cache_key(actor) -> str:
+    """The key :func:`stimuli.bodies.fit_body` files an actor's body under."""
+    from stimuli.bodies.api import normalise_sex
+    from stimuli.bodies.cache import cache_key
+    from stimuli.bodies.fit import FITTER_VERSION, Targets
+
+    girths = {k: None if getattr(actor, k, None) is None else float(getattr(actor, k))
+              for k in ("waist_m", "hip_m", "chest_m")}
+    targets = Targets(sex=normalise_sex(actor.sex), height_m=float(actor.height_m), bmi=float(actor.bmi), **girths)
+    return cache_key(targets.key(), FITTER_VERSION)
 
 
 def _run_single(args) -> int:
