@@ -130,7 +130,9 @@ MARKUP_OPENER = re.compile(r"<(?=[A-Za-z/!?])")
 
 def md_escape(text) -> str:
     """User text for a Markdown table cell: ``|`` escaped, line breaks folded and every ``<`` that could open
-    raw HTML written as ``&lt;``, so that a label can neither inject markup nor break the row.
+    raw HTML written as ``&lt;``, so that a label can neither inject markup nor break the row; ``*`` and ``_``
+    are escaped too, so that an interaction written the Statistica way (``SEX*GAIT*BODY``) is not read as
+    emphasis (renderers showed ``GAIT`` in italics and the stars disappeared).
 
     Markdown passes raw HTML through; in CommonMark a tag, comment, declaration or autolink starts with
     ``<`` followed by a letter, ``/``, ``!`` or ``?``, so those are the ``<`` escaped. Others (``p < 0.05``,
@@ -138,9 +140,11 @@ def md_escape(text) -> str:
 
     >>> print(md_escape("<img src=x onerror=alert(1)> | a\\nb, p < .05"))
     &lt;img src=x onerror=alert(1)> \\| a b, p < .05
+    >>> print(md_escape("SEX*GAIT*my_factor"))
+    SEX\\*GAIT\\*my\\_factor
     """
     flat = " ".join(str(text).splitlines())
-    return MARKUP_OPENER.sub("&lt;", flat).replace("|", "\\|")
+    return MARKUP_OPENER.sub("&lt;", flat).replace("|", "\\|").replace("*", "\\*").replace("_", "\\_")
 
 
 def format_num(x: float, digits: int = 2) -> str:

@@ -88,11 +88,11 @@ def test_tables_print_the_corrected_nc_and_power(exp1):
     row = exp1.effect("BODY:MOTION")
     spss = reported_statistics(row, "gg", "spss", exp1.alpha)
     md = render(exp1, "md", correction="gg")
-    line = next(x for x in md.splitlines() if x.startswith("| BODY*MOTION |"))
+    line = next(x for x in md.splitlines() if x.startswith("| BODY\\*MOTION |"))
     assert f"| {spss['nc']:.2f} |" in line and f"{row['noncentrality']:.2f}" not in line
     assert "nc and power from the corrected dof, as SPSS" in md
     old = render(exp1, "md", correction="gg", corrected_power="uncorrected")
-    assert f"| {row['noncentrality']:.2f} |" in next(x for x in old.splitlines() if x.startswith("| BODY*MOTION |"))
+    assert f"| {row['noncentrality']:.2f} |" in next(x for x in old.splitlines() if x.startswith("| BODY\\*MOTION |"))
     rows = {r["effect"]: r for r in csv.DictReader(io.StringIO(render(exp1, "csv", correction="gg")))}
     assert float(rows["BODY:MOTION"]["nc_reported"]) == spss["nc"]
     assert float(rows["BODY:MOTION"]["power_reported"]) == spss["power"]

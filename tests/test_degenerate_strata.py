@@ -67,7 +67,7 @@ def test_singular_error_shows_dash_for_epsilon_and_uncorrected_dof():
     md = render(table, "md", all_rows=True, correction="gg")
     assert "1.24, 9.94" not in md and "0.621" not in md and "0.846" not in md
     assert "| W | 38.40 | 2, 16 | 19.20 | ∞ | <0.001 | 1.00 | ∞ | 1.00 | — |" in md
-    assert "| W*V | 0.00 | 2, 16 | 0.00 | — | — | — | — | — | — |" in md
+    assert "| W\\*V | 0.00 | 2, 16 | 0.00 | — | — | — | — | — | — |" in md
     assert "| V | 27.23 | 1, 8 | 27.23 | 23.23 | <0.01 | 0.74 | 23.23 | 0.99 |  |" in md   # d = 1: no ε, blank
     assert render(table, "md", all_rows=True) == render(table_c(), "md", all_rows=True)   # no ε column: unchanged
 
@@ -145,7 +145,7 @@ def test_tukey_does_not_test_against_an_error_without_variance():
 
     md = render(table, "md", all_rows=True)
     assert "g1/b > g1/a" not in md and "b > a" not in md
-    assert md.splitlines()[0].endswith("Tukey: W, W*G, W*V not tested (—), their error term has no variance.**")
+    assert md.splitlines()[0].endswith("Tukey: W, W\\*G, W\\*V not tested (—), their error term has no variance.**")
     w_row = next(line for line in md.splitlines() if line.startswith("| W |"))
     assert w_row.endswith("| — |")
     for fmt in ("tex", "html"):

@@ -39,12 +39,17 @@ def test_format_p_like_the_paper():
     assert format_p(float("nan")) == ""
 
 
+def md_name(effect: str) -> str:
+    """An effect as the md table shows it: ``GAIT:SEX`` as ``GAIT\\*SEX`` (stars escaped: not emphasis)."""
+    return effect.replace(":", "\\*")
+
+
 def test_markdown_groups_and_significant_only(table):
     md = render(table, "md")
     sig = table.significant()
     assert "| *Main effects* |" in md and "| *Two-way interaction effects* |" in md
     for name in table.effects.index:
-        shown = f"| {name.replace(':', '*')} |" in md
+        shown = f"| {md_name(name)} |" in md
         assert shown == (name in sig), name
     assert "| GAIT | 14.28 | 1, 14 | 14.28 | 33.76 | <0.001 | 0.71 | 33.76 | 1.00 | W > J |" in md
     assert "Error(" not in md
@@ -53,7 +58,7 @@ def test_markdown_groups_and_significant_only(table):
 def test_all_rows_include_every_effect_and_strata(table):
     md = render(table, "md", all_rows=True)
     for name in table.effects.index:
-        assert f"| {name.replace(':', '*')} |" in md
+        assert f"| {md_name(name)} |" in md
     assert "| *Four-way interaction effects* |" in md
     for label in table.strata.index:
         assert f"| {label} |" in md
@@ -152,7 +157,7 @@ def test_rounding_noise_prints_as_zero_and_untestable_effects_as_dashes():
     assert 0 < table.strata.loc["Error", "ss"] < 1e-20
     md = render(table, "md", all_rows=True)
     assert not re.search(r"\de-\d", md)                                       # no 2.6e-29 anywhere
-    assert "| BODY*SOURCE*VIEW | 0.00 | 1, 6 | 0.00 | 0.00 | 1.00 | 0.00 | 0.00 | 0.05 |" in md
+    assert "| BODY\\*SOURCE\\*VIEW | 0.00 | 1, 6 | 0.00 | 0.00 | 1.00 | 0.00 | 0.00 | 0.05 |" in md
     assert "| VIEW | 0.00 | 1, 6 | 0.00 | — | — | — | — | — |" in md
     assert "| Error | 0.00 | 6 | 0.00 |" in md and "| Error(BODY) | 0.00 | 6 | 0.00 |" in md
     rows = {r["effect"]: r for r in csv.DictReader(io.StringIO(render(table, "csv", all_rows=True)))}
