@@ -8,7 +8,12 @@ actor's fitted Anny body, mesh-metric time, and Penetrate / Float / Skate / unst
 the CMU captures retargeted onto every actor; loop seam error; the thesis worked-example error.
 ``--import-only`` stops after the import times; ``--loop-only`` prints, per capture, import + loop
 extraction (``capture_loop``: steady-range search, best-closing cycles, heading drift, belt) and what
-the loop took, then stops. Numbers only, no assertions.
+the loop took, then stops. ``--cleanup`` prints, per capture, the default clean-up's figures on a
+1.80 m BMI-27 man (``capture_loop`` → ``retarget`` → ``motion_quality`` on the mesh): Skate (HUMOS %),
+slip (PhysDiff/PHC mm), Penetrate mean/max and Float (mm), the largest knee flexion and the largest
+knee change between two 30-fps frames of the result and of the loop before retargeting, the largest /
+RMS joint change from the retargeted source, and the CPU seconds of retarget + clean-up; then stops.
+Numbers only, no assertions.
 """
 
 from __future__ import annotations
@@ -69,6 +74,49 @@ def loop_times(repeats: int = 3) -> None:
         print(f"{str(path.relative_to(MOCAP)):58} {best_import:8.3f} {best_loop:6.3f} {best_import + best_loop:7.3f}  {what}")
 
 
+def _knee_at_30fps(motion) -> tuple[float, float]:
+    """(largest knee change between two 30-fps frames, largest knee flexion), degrees, either leg."""
+    from stimuli.motion.metrics import knee_angles
+
+    knees = knee_angles(motion.resample(30.0))
+    return (max(float(np.abs(np.diff(k)).max()) for k in knees.values()),
+            max(float(k.max()) for k in knees.values()))
+
+
+def cleanup_table() -> None:
+    """The default clean-up on every capture that loops (walk, or jog for the runs and jogs), onto a
+    1.80 m BMI-27 man; a capture that gives no loop (06_10) is looped whole by ``make_loop`` and marked *."""
+    from stimuli.bodies import fit_body
+    from stimuli.errors import StimuliError
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import capture_loop, make_loop
+    from stimuli.motion.quality import motion_quality
+    from stimuli.motion.retarget import retarget
+
+    body = fit_body("M", 1.80, 27.0)
+    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
+    print(f"{'capture':58} {'skate%':>6} {'slip':>5} {'pen':>5} {'penmax':>6} {'float':>5} {'knee':>5} {'src':>5} "
+          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5}")
+    for path in files:
+        gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+        name = str(path.relative_to(MOCAP))
+        capture = read_bvh(path)
+        try:
+            loop = capture_loop(capture, gait)
+        except StimuliError:
+            loop = make_loop(capture, cycles=2).resample(30.0)
+            loop.metadata["looped"] = True
+            name += " *"
+        t0 = time.process_time()
+        out = retarget(loop, body)
+        cpu = time.process_time() - t0
+        q = motion_quality(out, body)
+        (d_src, k_src), (d_out, k_out) = _knee_at_30fps(loop), _knee_at_30fps(out)
+        print(f"{name:58} {q['skate_humos_pct']:6.1f} {q['skate_phc_mm']:5.2f} {q['penetrate_mm']:5.1f} "
+              f"{q['penetrate_max_mm']:6.1f} {q['float_mm']:5.1f} {k_out:5.1f} {k_src:5.1f} {d_out:5.1f} {d_src:5.1f} "
+              f"{out.metadata['joint_change_max_deg']:6.1f}/{out.metadata['joint_change_rms_deg']:5.1f} {cpu:5.2f}")
+
+
 def main() -> None:
     from stimuli.bodies import body_for_actor
     from stimuli.motion.bvh import read_bvh
@@ -124,10 +172,13 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--import-only", action="store_true", help="only the import time per capture")
     parser.add_argument("--loop-only", action="store_true", help="only import + loop extraction per capture")
+    parser.add_argument("--cleanup", action="store_true", help="only the clean-up's figures per capture")
     args = parser.parse_args()
     np.set_printoptions(precision=3)
     if args.loop_only:
         loop_times()
+    elif args.cleanup:
+        cleanup_table()
     else:
         import_times()
         if not args.import_only:

@@ -7,7 +7,10 @@ Method (rest-pose alignment, then clean-up):
    direction): G_anny(t) = D_src(t) · A. This absorbs rest-pose differences (a T-pose source on
    Anny's A-pose, splayed legs, a CMU foot bone pointing down) while keeping the source's twist; a
    final swing makes each bone point exactly along the source segment. The spine is spread over
-   Anny's five spine bones by slerp between pelvis and chest, the neck over its three.
+   Anny's five spine bones by slerp between pelvis and chest, the neck over its three. Pelvis,
+   chest, head and the legs' roll take a rest turn snapped to the 24 axis-to-axis turns
+   (:func:`rest_turn`: a rig whose rest frames lie along other axes, Bandai's); a foot standing flat
+   on the source's floor stands flat on Anny's (:func:`flat_foot_turn`).
 2. The pelvis path is scaled by the leg-length ratio (thigh + shank + ankle height, from the
    segment lengths, whatever the rest pose): root height and stride follow the target's legs, so
    the belt speed scales too (recorded).
@@ -30,7 +33,7 @@ from stimuli.motion import quat
 from stimuli.motion.arms import clavicle_world
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
-from stimuli.motion.contact import contact_mask, foot_contacts
+from stimuli.motion.contact import contact_mask, foot_contacts, ground_speed
 from stimuli.motion.footfix import clean_feet, joint_change_deg, leg_joint_indices, lock_feet, sole_positions
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
@@ -47,10 +50,19 @@ for _s, _S in (("l", "L"), ("r", "R")):
         f"upperarm01.{_S}": (f"{_s}_shoulder", (f"{_s}_shoulder", f"{_s}_elbow")),
         f"lowerarm01.{_S}": (f"{_s}_elbow", (f"{_s}_elbow", f"{_s}_wrist")),
     })
+LEG_BONES = ("upperleg01", "lowerleg01", "foot")
 SPINE = ["spine05", "spine04", "spine03", "spine02", "spine01"]
 NECK = ["neck01", "neck02", "neck03", "head"]
 NEAR_GROUND_M = 0.025
 STANCE_HEIGHT_M = 0.03
+# A foot stands flat while its ankle and its toe joint both stay put (over the belt).
+FLAT_FOOT_SPEED_MPS = 0.25
+FLAT_FOOT_MIN_S = 0.1
+FLAT_FOOT_BAND_M = 0.01
+# Flat feet whose ankle→toe line is this close to the target's pitch keep the segment swing: the
+# CMU rigs (14–19°), CC4 (11–13°) and the generator (18.6°) against Anny's 15°. Turning those too
+# moved the generated walk's unstable % from 31 to 41 and the CMU walk's deepest vertex 2.5 → 9 mm.
+FLAT_FOOT_TOLERANCE_DEG = 10.0
 
 
 def _rest_pos(rig) -> np.ndarray:
@@ -150,6 +162,55 @@ def rest_turn(grot: np.ndarray, frame: np.ndarray, target_frame: np.ndarray) -> 
     return quat.from_scipy(Rotation.from_matrix(best))
 
 
+def _pitch_deg(v: np.ndarray) -> np.ndarray:
+    """How far directions (..., 3) point below the horizontal, degrees."""
+    return np.degrees(np.arcsin(np.clip(-v[..., 1] / np.linalg.norm(v, axis=-1), -1.0, 1.0)))
+
+
+def _heading_frame(direction: np.ndarray) -> np.ndarray:
+    """Frames (..., 3, 3) of a foot standing flat: up is the world's, forward its heading."""
+    up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), direction.shape)
+    return _axis_frame(np.cross(up, direction * np.array([1.0, 0.0, 1.0])), up)
+
+
+def flat_foot_turn(source: Motion, grot: np.ndarray, gpos: np.ndarray, ankle: int, toe: int,
+                   rest_direction: np.ndarray) -> np.ndarray | None:
+    """The fixed turn (w-first quaternion) from the source ankle's frame to the target's foot that
+    puts a foot standing flat on the source's floor flat on the target's, heading as it heads; None
+    where the capture shows less than 0.1 s of flat foot (ankle and toe joint both slower than
+    0.25 m/s over the belt, horizontally and vertically, both within 1 cm of their lowest), and
+    where that foot's ankle→toe line is within :data:`FLAT_FOOT_TOLERANCE_DEG` of the target's
+    (the bone is then swung onto the line, and the clean-up lays the foot flat in mid-stance).
+
+    Why: the ankle→toe line of a flat foot points 14–19° down on the CMU rigs, 38–43° on Bandai's
+    (its toe joint sits low), Anny's 15°; swung onto that line, a Bandai foot stood on its toes all
+    stance (toe tip 9 cm below the floor, heel 3 cm above) and the clean-up turned it back.
+    """
+    flat = _flat(source, gpos, ankle, toe)
+    if flat.sum() < FLAT_FOOT_MIN_S * source.fps:
+        return None
+    segment = gpos[flat, toe] - gpos[flat, ankle]
+    if abs(np.median(_pitch_deg(segment)) - _pitch_deg(np.asarray(rest_direction, float))) < FLAT_FOOT_TOLERANCE_DEG:
+        return None
+    frames = _heading_frame(segment)
+    local = np.einsum("tji,tjk->tik", quat.to_scipy(grot[flat, ankle]).as_matrix(), frames)
+    u, _, vt = np.linalg.svd(local.mean(axis=0))
+    turn = (u @ vt) @ _heading_frame(np.asarray(rest_direction, float)).T
+    return quat.from_scipy(Rotation.from_matrix(turn))
+
+
+def _flat(source: Motion, gpos: np.ndarray, ankle: int, toe: int) -> np.ndarray:
+    """Frames where the foot stands flat: its ankle and toe joint both stay put over the belt."""
+    belt = float(source.metadata.get("belt_speed_mps", 0.0)) if source.metadata.get("treadmill") else 0.0
+    cyclic = bool(source.metadata.get("looped"))
+    speed = ground_speed(gpos[:, [ankle, toe]], source.fps, belt, cyclic)
+    height = gpos[:, [ankle, toe], 1]
+    vertical = np.abs(np.gradient(height, 1.0 / source.fps, axis=0))
+    # at their lowest too: a heel rising slowly in late stance is not a flat foot
+    low = height - np.percentile(height, 5, axis=0) < FLAT_FOOT_BAND_M
+    return np.all((speed < FLAT_FOOT_SPEED_MPS) & (vertical < FLAT_FOOT_SPEED_MPS) & low, axis=1)
+
+
 def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
     """Anny world rotations (T×J×4) for the mapped bones; unmapped bones get None (marked)."""
     roles = role_indices(source)
@@ -191,10 +252,21 @@ def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
         r_s = src_rest[roles[b]] - src_rest[roles[a]]
         if np.linalg.norm(r_s) < 1e-6 or np.linalg.norm(r_t) < 1e-6:
             continue
-        align = quat.between(r_t, r_s)
-        g = quat.mul(grot[:, roles[driver]], align)
         # Exact direction: swing the bone onto the source segment (corrects intermediate joints).
         want = gpos[:, roles[b]] - gpos[:, roles[a]]
+        if bone.split(".")[0] in LEG_BONES:
+            # The leg's roll as well as its direction: frames of its segment and the hips' line, as for
+            # the trunk (rest_turn). The shortest turn between rest directions rolled Bandai's and CC4's
+            # feet (rests along ±x, +y) onto their sides; the clean-up then turned them back by 100-180°.
+            align = rest_turn(grot[:, roles[driver]], _axis_frame(hips, want), _axis_frame(rest_hips, r_t))
+        else:
+            align = quat.between(r_t, r_s)
+        g = quat.mul(grot[:, roles[driver]], align)
+        if bone.startswith("foot."):
+            turn = flat_foot_turn(source, grot, gpos, roles[a], roles[b], r_t)
+            if turn is not None:
+                world[rig.index(bone)] = quat.mul(grot[:, roles[a]], turn)
+                continue
         have = quat.rotate(g, r_t)
         world[rig.index(bone)] = quat.mul(quat.between(have, want), g)
     return world, roles
@@ -271,9 +343,12 @@ def retarget(source: Motion, body, cleanup: bool = True, keep_speed: bool = Fals
 
 
 def planted(motion: Motion, body) -> dict[str, np.ndarray]:
-    """Feet in contact: heel strike to toe off (Zeni events), grown by up to two frames before
-    heel strike where the foot is already near the ground; where a foot has no events, from the
-    contact model (``contact.contact_mask``: height and belt-relative speed with hysteresis)."""
+    """Feet in contact: heel strike to toe off (Zeni events) while the contact model also has the
+    foot down (``contact.contact_mask``: height and belt-relative speed with hysteresis), grown by up
+    to two frames before heel strike where the foot is already near the ground; where a foot has no
+    events, the contact model alone. Zeni's toe off comes late on real captures: the foot stayed
+    pinned while its toes already slid forward (Bandai dash 16.7 % skate, now 5.6 % with that alone)
+    and was let go with the knee straightened (CC4 07_12: 11° → 47° in one 60-fps frame)."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
     belt_speed = float(motion.metadata.get("belt_speed_mps", 0.0)) if motion.metadata.get("treadmill") else 0.0
@@ -290,7 +365,8 @@ def planted(motion: Motion, body) -> dict[str, np.ndarray]:
         # Exp-2 men's average walk then floated 2 cm with 62 % of frames airborne).
         flat = np.median(low[stance[s]]) if stance[s].any() else np.percentile(low, 2)
         near = low - flat < STANCE_HEIGHT_M
-        c = stance[s] & near if stance[s].any() else contact_mask(sole, motion.fps, belt_speed, flat, cyclic=looped)
+        model = contact_mask(sole, motion.fps, belt_speed, flat, cyclic=looped)
+        c = stance[s] & near & model if stance[s].any() else model
         out[s] = _dilate_near_ground(c, sole[:, :, 1].min(axis=1), looped)
     return out
 
