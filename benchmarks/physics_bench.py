@@ -11,13 +11,21 @@ PD plus the reference body's inverse-dynamics feed-forward (``OUT/pd``, ``OUT/pd
 reports, Fig. 7), and prints per actor × gait the flight share against the reference's own,
 tracking RMS, b, the knee flexion peaks and the torques over the human limits (issue 21's table).
 
-    python benchmarks/physics_bench.py [--controllers OUT]
+``--captures OUT`` runs the same protocol step with NoCOM averages of real captures: Exp 2 with
+each test actor naming a capture of ``../shared/data/mocap`` per gait (:data:`CAPTURES`, fixed
+before any run: 7 distinct walks, the 3 runs, split between the sexes), looped from their steady
+straight ranges, retargeted onto the sex's mean body and DTW-averaged; then PD and PD +
+feed-forward (gains chosen per average) on the 12 bodies (``OUT/pd``, ``OUT/pd_ff``), with the
+acceptance figures (fall, flight against the average's own, tracking, b against the weight gap).
+
+    python benchmarks/physics_bench.py [--controllers OUT | --captures OUT]
 """
 
 from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 
 def main() -> None:
@@ -39,29 +47,70 @@ def main() -> None:
                   f"{rep['rate_hz']:>9.0f}{total:>14.2f}")
 
 
+MOCAP = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"
+# Exp-2 test actor -> capture per gait (../shared/data/mocap). Seven distinct walks import to a
+# loop (06_10 does not); the eighth actor takes the metres copy of 131_02 (the same take). Only
+# three runs exist, so each sex's jog average holds all three and repeats one.
+CAPTURES = {
+    "F_Hi1": ("more/bandai1_walk_normal_001_30fps.bvh", "more/bandai1_run_tired_001_jog_30fps.bvh"),
+    "F_Hi2": ("more/cmu_07_01_walk_cc4rig_60fps.bvh", "more/bandai1_dash_active_001_run_30fps.bvh"),
+    "F_Lo1": ("more/cmu_07_12_brisk_walk_cc4rig_60fps_tpose_frame0.bvh", "cmu_35_17_run.bvh"),
+    "F_Lo2": ("more/cmu_131_02_start_walk_stop_maxnames_120fps.bvh", "more/bandai1_run_tired_001_jog_30fps.bvh"),
+    "M_Hi1": ("cmu_35_01_walk.bvh", "cmu_35_17_run.bvh"),
+    "M_Hi2": ("more/cmu_02_01_walk_mb2names_120fps.bvh", "more/bandai1_run_tired_001_jog_30fps.bvh"),
+    "M_Lo1": ("more/cmu_07_02_walk_cc4rig_60fps_NOTOES_derived.bvh", "more/bandai1_dash_active_001_run_30fps.bvh"),
+    "M_Lo2": ("more/cmu_131_02_start_walk_stop_maxnames_120fps_meters.bvh", "cmu_35_17_run.bvh"),
+}
+
+
+def captures_protocol(out: Path, protocol: str = "protocols/exp2_com_vs_average.yaml") -> Path:
+    """Exp 2 with every test actor naming its captures (:data:`CAPTURES`), written to ``out``."""
+    import yaml
+
+    data = yaml.safe_load(Path(protocol).read_text())
+    for actor in data["actors"]:
+        if actor["id"] in CAPTURES:
+            actor["motions"] = dict(zip(("walk", "jog"), (str(MOCAP / f) for f in CAPTURES[actor["id"]])))
+    data["name"] = "exp2_captures"
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "exp2_captures.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
 def compare_controllers(out: str, protocol: str = "protocols/exp2_com_vs_average.yaml") -> None:
     """The Exp-2 table of both controller readings (see the module docstring)."""
-    from pathlib import Path
+    import resource
 
     from stimuli.physics.protocol_step import run_protocol
 
-    print("controller actor gait ref_flight sim_flight tracking_deg b_mm knee_swing_peak knee_stance_peak "
-          "over_limit(dof:peak/limit) fell wall_s")
+    print("controller actor gait ref_flight sim_flight tracking_deg b_mm weight_gap_kg gain_scale knee_swing_peak "
+          "knee_stance_peak over_limit(dof:peak/limit) fell wall_s cpu_s")
     for name, ff in (("pd", False), ("pd_ff", True)):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), _cpu_s(resource)
         try:
             reports = run_protocol(protocol, Path(out) / name, feedforward=ff)["reports"]
         except Exception as exc:   # a fall: the reports are still on disk
             print(f"{name}: {exc}")
             import json
             reports = [json.loads(p.read_text()) for p in sorted((Path(out) / name / "reports").glob("*.json"))]
-        wall = time.perf_counter() - start
+        wall, cpu = time.perf_counter() - start, _cpu_s(resource) - cpu
         for r in sorted(reports, key=lambda r: (r["gait"], r["actor"])):
             over = [f"{d}:{v['peak']:.0f}/{v['limit']:.0f}" for d, v in r.get("torque_peaks_nm", {}).items()
                     if v["peak"] > v["limit"]]
+            gap = r["body"]["weight_kg"] - r["reference_body"]["weight_kg"]
             print(f"{name} {r['actor']} {r['gait']} {r.get('reference_flight_fraction')} {r['flight_fraction']} "
-                  f"{r['tracking_rms_deg_overall']} {1000 * r['b_m']:.2f} {r.get('knee_flexion_peak_deg')} "
-                  f"{r.get('knee_flexion_stance_peak_deg')} {','.join(over) or '-'} {r['fell']} {wall:.0f}")
+                  f"{r['tracking_rms_deg_overall']} {1000 * r['b_m']:.2f} {gap:+.1f} {r.get('gain_choice', {}).get('scale', 1)} "
+                  f"{r.get('knee_flexion_peak_deg')} {r.get('knee_flexion_stance_peak_deg')} {','.join(over) or '-'} "
+                  f"{r['fell']} {wall:.0f} {cpu:.0f}")
+        print(f"{name}: wall {wall:.1f} s, CPU {cpu:.1f} s (this process and its workers), "
+              f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+
+
+def _cpu_s(resource) -> float:
+    """CPU seconds of this process and its finished child processes (the protocol step's workers)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 if __name__ == "__main__":
@@ -69,5 +118,9 @@ if __name__ == "__main__":
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--controllers", metavar="OUT", help="Exp-2 table of pure PD vs PD + feed-forward")
+    parser.add_argument("--captures", metavar="OUT", help="the same on NoCOM averages of the real captures")
     args = parser.parse_args()
-    compare_controllers(args.controllers) if args.controllers else main()
+    if args.captures:
+        compare_controllers(args.captures, str(captures_protocol(Path(args.captures))))
+    else:
+        compare_controllers(args.controllers) if args.controllers else main()

@@ -197,17 +197,21 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
     return np.concatenate([force, torque])
 
 
-# Actuator torque limits (N·m), the same for every body (fat mass adds no muscle): rounded maximal
-# voluntary isometric torques of healthy young adults, per joint and Euler axis (X: flexion/
-# extension, Z: ab-/adduction or inversion/eversion, Y: axial rotation; the larger direction of
-# each pair). Sources: Harbo, Brincks & Andersen (2012), "Maximal isokinetic and isometric muscle
-# strength of major muscle groups related to age, body mass, height, and sex in 178 healthy
-# subjects", Eur J Appl Physiol 112:267–275 (hip, knee, ankle, shoulder, elbow flexion/extension);
-# Anderson, Madigan & Nussbaum (2007), "Maximum voluntary joint torque as a function of joint
-# angle and angular velocity", J Biomech 40:3105–3113 (hip, knee, ankle); trunk and neck, and the
-# secondary axes, from the same order of magnitude of published norms. The values are rounded up
-# to the men's norms (the larger), so a limit binds only where a body would need more than a
-# strong adult could give; not re-checked against the papers' tables in this session.
+# Actuator torque limits (N·m), the same for every body (fat mass adds no muscle), per joint and
+# Euler axis (X: flexion/extension, Z: ab-/adduction or inversion/eversion, Y: axial rotation; the
+# larger direction of each pair). PROVENANCE NOT CHECKED: the values were rounded from memory of
+# two papers that are not in ../shared/seeds, and none was compared with their tables:
+# - Harbo, Brincks & Andersen (2012), Eur J Appl Physiol 112:267–275, doi:10.1007/s00421-011-1975-3:
+#   isometric and isokinetic (Biodex) peak torques at knee, ankle, hip, shoulder, elbow and wrist
+#   (18 test protocols per sex, 93 men and 85 women; per its abstract), published as sex-specific
+#   regressions of peak torque on age, height and body mass (body mass entered 27 of its 36 models),
+#   so it gives a limit per body, not one number; its isometric men's models are where the hip,
+#   knee, ankle, shoulder and elbow values should come from.
+# - Anderson, Madigan & Nussbaum (2007), J Biomech 40:3105–3113: maximum voluntary hip, knee and
+#   ankle flexion/extension torque as a function of joint angle and angular velocity, fitted per
+#   age and sex group; its peak isometric torque parameter is the check for those six values.
+# Neither paper covers the spine or neck: those values have no source at all; which of the other
+# axes (ab-/adduction, rotation, inversion/eversion) Harbo's protocols include was not checked.
 TORQUE_LIMITS_NM = {
     "spine": {"X": 250.0, "Z": 200.0, "Y": 100.0},
     "neck": {"X": 60.0, "Z": 50.0, "Y": 30.0},
