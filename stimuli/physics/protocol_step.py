@@ -256,8 +256,8 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
 
     ``feedforward``: the PD plus the inverse-dynamics feed-forward of the NoCOM motion on its
     reference body (:func:`stimuli.physics.retarget.retarget`), with gains chosen once per NoCOM
-    motion on that body (:func:`motion_gains`) and kept for its every actor; default the paper's
-    pure PD with the shipped gains.
+    motion on that body (:func:`stimuli.physics.tune.tune_for_motion`, cached) and kept for its
+    every actor; default the paper's pure PD with the shipped gains.
 
     ``scheduler``: a ``shapemotion.execution.Scheduler`` to simulate on a Dask cluster (None: ``workers``
     local processes); :class:`_FilesByValue` sends each job's files there and back.
