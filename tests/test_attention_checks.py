@@ -1,8 +1,8 @@
 """Attention checks: protocol block → jsPsych page (headless Chromium) → data flag → import report and exclusion.
 
 The block is optional: without it the design files are byte for byte what they were. The checks live in
-the jsPsych export (and ``shapemotion serve``, tests/test_serve_checks.py); Qualtrics/PsychoPy exports
-refuse them by name.
+every export (and ``shapemotion serve``, tests/test_serve_checks.py); the Qualtrics and PsychoPy ones are
+tested in tests/test_attention_exports.py.
 """
 
 from __future__ import annotations
@@ -58,18 +58,17 @@ def test_a_wrong_block_is_refused_naming_the_field(block, says):
     assert says in str(error.value)
 
 
-def test_only_the_jspsych_export_carries_them(tmp_path):
+def test_every_export_carries_them(tmp_path):
     design = tmp_path / "design"
     write_design(build_design(tiny(CHECKS)), design)
     make_clips(design)
     for fmt in ("qsf", "qualtrics-txt", "psychopy"):
-        with pytest.raises(StimuliError, match=f"--format {fmt}: the protocol's attention_checks are built into "
-                                               "the jsPsych export only"):
-            export_survey(design, fmt, tmp_path / fmt, video_base_url="https://example.org/clips")
-        assert not (tmp_path / fmt).exists()
-    results = {r.format: r for r in export_all(design, tmp_path / "all")}
-    assert (tmp_path / "all" / "jspsych" / "index.html").exists() and not (tmp_path / "all" / "psychopy").exists()
-    assert "attention_checks" in results["psychopy"].notes[0]
+        export_survey(design, fmt, tmp_path / fmt, video_base_url="https://example.org/clips")
+    assert "attention_check_1" in (tmp_path / "qsf").read_text()
+    assert "attention_check_1" in (tmp_path / "qualtrics-txt").read_text()
+    assert (tmp_path / "psychopy" / "conditions" / "attention_check.csv").exists()
+    export_all(design, tmp_path / "all")
+    assert (tmp_path / "all" / "jspsych" / "index.html").exists() and (tmp_path / "all" / "psychopy").exists()
     # the page gets the answer spelled as its button, and the request escaped
     cfg = config(load_source(design))
     assert cfg["attention"] == {"every": 2, "answer": "Medium",

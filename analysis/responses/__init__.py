@@ -27,11 +27,11 @@ import pandas as pd
 from analysis.errors import AnalysisError
 from analysis.io_design import DesignInfo
 from analysis.responses.answers import ANSWER, FILE, ROW, TagIndex
-from analysis.responses.qualtrics import qualtrics_answers
+from analysis.responses.qualtrics import qualtrics_answers, qualtrics_attention
 from analysis.responses.read import RawFile, folder_entries, read_response_file, response_files, shown
 from analysis.responses.tidy import assemble
 from analysis.responses.trialwise import records_and_ids, trialwise_answers
-from analysis.responses.attention import attention_report, exclude_inattentive
+from analysis.responses.attention import answer_buttons, attention_report, exclude_inattentive
 
 __all__ = ["ImportResult", "import_responses", "read_response_file"]
 
@@ -48,7 +48,7 @@ class ImportResult:
     data: pd.DataFrame
     exclusions: pd.DataFrame
     n_rows: int
-    attention: pd.DataFrame | None = None   # jsPsych attention checks per participant (attention.py), if any
+    attention: pd.DataFrame | None = None   # attention checks per participant (attention.py), if any
 
     @property
     def n_imported_rows(self) -> int:
@@ -126,13 +126,17 @@ def import_responses(path: str | Path, design: DesignInfo) -> ImportResult:
         if raw.format.startswith("qualtrics"):
             answers, exclusions, columns = qualtrics_answers(raw, tags, design.between,
                                                              design.response_type == "ranking")
+            checks = design.protocol.get("attention_checks")
+            if checks:
+                attention = qualtrics_attention(raw, str(checks.get("answer", "")), answer_buttons(design))
         else:
             (answers, exclusions), columns = trialwise_answers(raw, design.between, design.within), None
             if raw.format.startswith("jspsych"):
                 attention = attention_report(*records_and_ids(raw))
-                rule = (design.protocol.get("attention_checks") or {}).get("exclude_if_failed")
-                answers, inattentive = exclude_inattentive(answers, attention, rule)
-                exclusions = exclusions + inattentive
+        if attention is not None:
+            rule = (design.protocol.get("attention_checks") or {}).get("exclude_if_failed")
+            answers, inattentive = exclude_inattentive(answers, attention, rule)
+            exclusions = exclusions + inattentive
         data, excluded = assemble(answers, exclusions, raw.row_numbers, design,
                                   trialwise=not raw.format.startswith("qualtrics"), stimulus_columns=columns)
     except AnalysisError as exc:

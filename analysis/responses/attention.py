@@ -1,9 +1,11 @@
-"""Attention checks in jsPsych data: who failed how many, and the exclusion the protocol asks for.
+"""Attention checks in jsPsych and Qualtrics data: who failed how many, and the exclusion the protocol asks for.
 
 The jsPsych export (protocol ``attention_checks``) adds instructed-response rows marked
 ``attention_check = 1`` with the requested ``attention_answer`` and the button's ``response_label``.
 The answer is judged here again from those two (ignoring case and spacing, as labels are matched
-elsewhere), not from the page's own ``attention_passed``. A participant who failed
+elsewhere), not from the page's own ``attention_passed``. A Qualtrics export's ``attention_check_<k>``
+columns are turned into the same records (:func:`analysis.responses.qualtrics.qualtrics_attention`,
+buttons from :func:`answer_buttons`) and judged here the same way. A participant who failed
 ``exclude_if_failed`` or more checks has every answer excluded with reason
 :data:`FAILED_ATTENTION` (exclusions.csv says how many of how many were failed).
 
@@ -28,6 +30,22 @@ COLUMNS = ["participant", "checks", "failed"]
 
 def _label(text: str) -> str:
     return " ".join(text.split()).casefold()
+
+
+def answer_buttons(design) -> list[str]:
+    """The buttons of a check (as of every answer): the Likert labels (``1``…``k`` without labels), else the
+    screen positions' names — the design's ``position_labels``, else Left/Right for two, A, B, … for more
+    (the survey export's rule, stimuli.protocol.position_labels_of).
+
+    >>> from types import SimpleNamespace as D
+    >>> answer_buttons(D(response_type="afc", labels=[], position_labels=[], k=2))
+    ['Left', 'Right']
+    """
+    if design.response_type == "likert":
+        return list(design.labels) or [str(i) for i in range(1, design.k + 1)]
+    if design.position_labels:
+        return list(design.position_labels)
+    return ["Left", "Right"] if design.k == 2 else [chr(ord("A") + i) for i in range(design.k)]
 
 
 def attention_report(records: list[dict], pids: list[str]) -> pd.DataFrame:

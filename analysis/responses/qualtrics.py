@@ -10,6 +10,10 @@ stimulus and repetition (``F-walk-Hi1_r1`` and ``f_walk_hi1_r1``) are refused, a
 One bad cell excludes that answer, not the respondent (``scope`` ``answer`` in the exclusions): the row's
 other answers are imported unless the respondent then lacks a design cell (see :mod:`analysis.responses.tidy`).
 
+Attention-check questions (export tags ``attention_check_1``, … that the QSF/TXT export writes) are not
+answers: :func:`qualtrics_attention` reads them into the same per-participant report as jsPsych's checks
+(:mod:`analysis.responses.attention`).
+
 A forced-choice value is an answer option of the survey (``scoring.CHOICE``): a number is the option's 1-based
 screen position (the numeric export's recode), text the option's label (a position label, ``Left``/``Right``) —
 never a level name that happens to look like a number (see :mod:`analysis.responses.scoring`).
@@ -22,11 +26,14 @@ from dataclasses import dataclass, field
 
 from analysis.errors import AnalysisError
 from analysis.responses.answers import Answer, Exclusion, TagIndex
+from analysis.responses.attention import attention_report
 from analysis.responses.read import QUALTRICS_METADATA, RawFile, _participant_column, shown
 from analysis.responses.scoring import CHOICE, LABEL
 
 TIMING = re.compile(r"_(First Click|Last Click|Page Submit|Click Count)$", re.IGNORECASE)
 RANK_POSITION = re.compile(r"^(?P<base>.+)_(?P<pos>\d+)$")
+# export tag of an attention-check question (stimuli/survey/checks.py CHECK_TAG)
+ATTENTION_TAG = re.compile(r"^attention_check_\d+$", re.IGNORECASE)
 UNFINISHED = {"0", "false", "no"}
 # Qualtrics Status codes that are not real respondents (numeric export / choice-text export).
 NOT_REAL = {"1", "2", "8", "9", "12", "17", "survey preview", "survey test", "spam", "preview spam",
@@ -43,6 +50,7 @@ class QualtricsColumns:
     embedded: list[int] = field(default_factory=list)
     timing: list[int] = field(default_factory=list)
     unknown: list[int] = field(default_factory=list)
+    attention: list[int] = field(default_factory=list)
 
 
 def classify_columns(raw: RawFile, tags: TagIndex | None, ranking: bool = False) -> QualtricsColumns:
@@ -56,6 +64,8 @@ def classify_columns(raw: RawFile, tags: TagIndex | None, ranking: bool = False)
             out.display_order.append(i)
         elif TIMING.search(name):
             out.timing.append(i)
+        elif ATTENTION_TAG.match(name):
+            out.attention.append(i)
         elif tags is not None and (hit := _match(name, tags, ranking)):
             out.questions[i] = hit
         elif import_id.startswith("QID") or (raw.format == "qualtrics-legacy" and re.match(r"^Q\d", name)):
@@ -116,26 +126,76 @@ def qualtrics_answers(raw: RawFile, tags: TagIndex, between: list[str], ranking:
     exclusions = [Exclusion(None, "", "unknown export tag",
                             f"question {shown(raw.columns[i])} ({_text(raw, i)}) names no stimulus of the design; "
                             f"column not imported", raw.columns[i]) for i in cols.unknown]
+    exclusions += [Exclusion(None, "", "attention check", f"question {shown(raw.columns[i])} is an attention check: "
+                             f"scored in the attention report, not imported as an answer", raw.columns[i])
+                   for i in cols.attention]
+    group_cols = {name: _find(raw.columns, name) for name in between}
+    reading = _reading(raw)
+    answers: list[Answer] = []
+    for row, record, pid, reason in _respondents(raw):
+        if reason:
+            exclusions.append(Exclusion(row, pid, *reason))
+            continue
+        groups = {n: record[i].strip() for n, i in group_cols.items() if i is not None and record[i].strip()}
+        answers += _row_answers(raw, record, row, pid, cols, groups, reading)
+    return answers, exclusions, stimulus_columns(raw, cols)
+
+
+def _respondents(raw: RawFile):
+    """(row number, record, participant id, why the row is excluded or None) for every data row."""
     pid_col = _id_column(raw)
     finished = _find(raw.columns, "Finished")
     status = _find(raw.columns, "Status")
-    group_cols = {name: _find(raw.columns, name) for name in between}
-    reading = LABEL if _choice_text(raw, finished, status) else CHOICE
     seen: dict[str, int] = {}
-    answers: list[Answer] = []
     for row, record in zip(raw.row_numbers, raw.rows):
         pid = record[pid_col].strip() if pid_col is not None and pid_col < len(record) else ""
         pid = pid or f"row{row}"
         reason = _row_problem(raw, record, finished, status)
         if reason is None and pid in seen:
             reason = ("duplicate participant id", f"{pid!r} already imported from row {seen[pid]}")
-        if reason:
-            exclusions.append(Exclusion(row, pid, *reason))
-            continue
-        seen[pid] = row
-        groups = {n: record[i].strip() for n, i in group_cols.items() if i is not None and record[i].strip()}
-        answers += _row_answers(raw, record, row, pid, cols, groups, reading)
-    return answers, exclusions, stimulus_columns(raw, cols)
+        if reason is None:
+            seen[pid] = row
+        yield row, record, pid, reason
+
+
+def _reading(raw: RawFile) -> str:
+    """LABEL for a choice-text export, CHOICE for a numeric one (see :func:`_choice_text`)."""
+    return LABEL if _choice_text(raw, _find(raw.columns, "Finished"), _find(raw.columns, "Status")) else CHOICE
+
+
+def qualtrics_attention(raw: RawFile, asked: str, labels: list[str]):
+    """The attention report (:func:`analysis.responses.attention.attention_report`) of the export's
+    ``attention_check_<k>`` columns, or None when it has none. ``asked``: the protocol's
+    ``attention_checks.answer``; ``labels``: the answer buttons, which a numeric export's value (the
+    choice's recode, 1…k) indexes. Only the respondents the import keeps are counted; a blank cell is
+    a check the respondent was not shown (another group's, another rotation's).
+
+    >>> from analysis.responses.read import RawFile
+    >>> raw = RawFile("x.csv", "qualtrics", ["ResponseId", "Finished", "attention_check_1"],
+    ...               rows=[["R_1", "1", "2"], ["R_2", "1", "3"]], row_numbers=[4, 5])
+    >>> qualtrics_attention(raw, "Medium", ["Light", "Medium", "Heavy"]).to_dict("records")
+    [{'participant': 'R_1', 'checks': 1, 'failed': 0}, {'participant': 'R_2', 'checks': 1, 'failed': 1}]
+    """
+    columns = [i for i, name in enumerate(raw.columns) if ATTENTION_TAG.match(name)]
+    if not columns:
+        return None
+    numeric = _reading(raw) == CHOICE
+    records, pids = [], []
+    for _, record, pid, reason in _respondents(raw):
+        for value in (record[i].strip() for i in columns if not reason and i < len(record)):
+            if value:
+                records.append({"attention_check": "1", "attention_answer": asked,
+                                "response_label": _button(value, labels, numeric)})
+                pids.append(pid)
+    return attention_report(records, pids)
+
+
+def _button(value: str, labels: list[str], numeric: bool) -> str:
+    """The label of the button a check's cell names: a numeric export's recode 1…k indexes ``labels``;
+    a choice-text export (or a number outside 1…k, which then matches no button) is the text itself."""
+    if numeric and value.isdigit() and 1 <= int(value) <= len(labels):
+        return labels[int(value) - 1]
+    return value
 
 
 def _choice_text(raw: RawFile, finished: int | None, status: int | None) -> bool:

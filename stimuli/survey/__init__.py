@@ -42,8 +42,6 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
     if fmt not in FORMATS:
         raise StimuliError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
     source = load_source(folder)
-    if fmt != "jspsych" and source.protocol.attention_checks is not None:
-        raise StimuliError(attention_refusal(fmt))
     out = Path(out)
     result = ExportResult(out, fmt)
     if fmt in ("qsf", "qualtrics-txt") and not video_base_url:
@@ -83,6 +81,10 @@ def export_survey(folder: str | Path, fmt: str, out: str | Path, video_base_url:
             result.notes.append("blocks.trials is fixed: set each test loop's loopType to sequential (blocks.csv "
                                 "column test_loop), so that every participant sees the test clips in the listed "
                                 "order, once per repetition")
+        if source.protocol.attention_checks is not None:
+            result.notes.append("attention_checks: inside each test loop, after the trial routine, add a check "
+                                "routine (conditions/attention_check.csv) skipped unless "
+                                "str(test_loop.thisN + 1) in check_after.split() (blocks.csv column check_after)")
     return result
 
 
@@ -163,12 +165,6 @@ def doubled_folder(base_url: str | None, files: list[str]) -> str:
     return last if last and firsts == {last} else ""
 
 
-def attention_refusal(fmt: str) -> str:
-    """Why a format other than jsPsych is not written for a protocol with attention checks."""
-    return (f"--format {fmt}: the protocol's attention_checks are built into the jsPsych export only; export "
-            f"--format jspsych, or remove attention_checks (and add checks in {fmt} by hand)")
-
-
 def export_all(folder: str | Path, out_dir: str | Path | None = None,
                video_base_url: str | None = None) -> list[ExportResult]:
     """Every format into ``out_dir`` (default ``folder/survey``), for ``render`` and ``demo``.
@@ -190,9 +186,6 @@ def export_all(folder: str | Path, out_dir: str | Path | None = None,
     results = []
     for fmt, name in ALL_OUTPUTS.items():
         target = out_dir / name
-        if fmt != "jspsych" and source.protocol.attention_checks is not None:
-            results.append(ExportResult(target, fmt, [attention_refusal(fmt)]))   # skipped, with the reason
-            continue
         try:
             if fmt == "jspsych" and target.exists():
                 result = _refresh_jspsych(folder, target, video_base_url)

@@ -33,6 +33,14 @@ Each conditions row has ``stimulus_id``, ``movie`` (path relative to the folder,
 MovieStim wants), the factor levels, ``left``/``right`` or ``positions``, ``question`` and the answer
 options (``options`` = labels joined by ``|``). With several between groups, the files carry the group in
 their name (``SEX=F|GAIT=walk`` → ``SEX-F_GAIT-walk``).
+
+With ``attention_checks`` also ``conditions/attention_check.csv`` (one row: ``attention_check`` = 1,
+``attention_answer`` spelled as its button, ``prompt``, ``options``), and blocks.csv gains ``check_after``:
+the test trials of the block (1-based, counted over the test loop's repetitions too) after which the
+check comes, space-separated (:mod:`stimuli.survey.checks`). The test loop stays random: in Builder a
+check routine follows the trial routine inside the test loop and is skipped unless
+``str(test_loop.thisN + 1) in check_after.split()``, so the checks keep their slots while the clips
+are shuffled around them.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ from pathlib import Path
 from stimuli.errors import StimuliError
 from stimuli.fileio import csv_text, write_all_or_nothing
 from stimuli.protocol import shown
+from stimuli.survey.checks import block_slots
 from stimuli.survey.plan import build_plan
 from stimuli.survey.source import StimulusInfo, SurveySource
 from stimuli.survey.text import answer_labels
@@ -67,6 +76,8 @@ def check_psychopy_text(source: SurveySource) -> None:
                                f"the answer options in PsychoPy's options column: the {len(labels)} labels would "
                                f"make {len('|'.join(labels).split('|'))} options; write the label without '|'")
     cells = {"response.question": p.response.question, field: "|".join(labels)}
+    if p.attention_checks is not None:
+        cells["attention_checks.prompt"] = check_prompt(p)
     for name, text in cells.items():
         if text.startswith("[") and text.endswith("]"):
             raise StimuliError(f"{where}: protocol field {name} {shown(text)}: PsychoPy evaluates a conditions cell "
@@ -86,6 +97,21 @@ def is_psychopy_column(name: str) -> bool:
     (True, False, False, False)
     """
     return name.isascii() and name.isidentifier() and not keyword.iskeyword(name)
+
+
+def check_prompt(protocol) -> str:
+    """The check's request as plain text (a PsychoPy TextStim shows no HTML)."""
+    checks = protocol.attention_checks
+    return checks.prompt.replace("{answer}", checks.answer)
+
+
+def _check_row(protocol) -> dict[str, object]:
+    """The one row of ``conditions/attention_check.csv``: what the check asks, with the answer as its button."""
+    labels = answer_labels(protocol)
+    key = " ".join(protocol.attention_checks.answer.split()).casefold()
+    answer = next(label for label in labels if " ".join(label.split()).casefold() == key)
+    return {"attention_check": 1, "attention_answer": answer, "prompt": check_prompt(protocol),
+            "options": "|".join(labels)}
 
 
 def _name(label: str) -> str:
@@ -116,8 +142,10 @@ def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, st
             prefix = "_".join(f"{k}-{v}" for k, v in parts) + ("_" if parts else "")
             where = dict(plan.groups) | ({"rotation": rotation.index} if rotation.index is not None else {})
             main_of = {b.label: m.label for m in rotation.main_blocks for b in m.blocks}
+            slots = block_slots(rotation.blocks, source.protocol.attention_checks)
             entries = {block.label: _block_entry(source, files, block, _name(prefix + block.label), movie_prefix,
-                                                 where | ({"main_block": main_of[block.label]} if main_of else {}))
+                                                 where | ({"main_block": main_of[block.label]} if main_of else {}),
+                                                 slots.get(id(block)))
                        for block in rotation.blocks}
             blocks += entries.values()
             for main in rotation.main_blocks:
@@ -133,20 +161,24 @@ def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, st
     if mains:
         files["main_blocks.csv"] = csv_text(mains)
     files["blocks.csv"] = csv_text(blocks)
+    if source.protocol.attention_checks is not None:
+        files["conditions/attention_check.csv"] = csv_text([_check_row(source.protocol)])
     files["trials.csv"] = csv_text([t | {"movie": movie_prefix + source.stimulus(t["stimulus_id"]).file}
                                     for t in source.trials])
     return files
 
 
 def _block_entry(source: SurveySource, files: dict[str, str], block, stem: str, movie_prefix: str,
-                 where: dict) -> dict[str, object]:
-    """A block's row of blocks.csv (``where``: its group, rotation, main block); its conditions files go
-    into ``files``."""
+                 where: dict, checks: list[int] | None) -> dict[str, object]:
+    """A block's row of blocks.csv (``where``: its group, rotation, main block; ``checks``: the test trials a
+    check follows, None without attention checks); its conditions files go into ``files``."""
     p = source.protocol
     entry = where | {"block_label": block.label, "nReps": p.repetitions, "test_file": f"conditions/{stem}_test.csv",
                      "practice_file": "", "practice_per_block": block.practice_count, "familiarization_file": ""}
     if p.blocks.trials == "fixed":   # the test loop's loopType (only then: other files stay as they were)
         entry["test_loop"] = "sequential"
+    if checks is not None:
+        entry["check_after"] = " ".join(map(str, checks))
     tests = [s for s, rep in block.tests if rep == 1]
     files[entry["test_file"]] = csv_text([_row(source, s, movie_prefix) for s in tests])
     if block.practice_count:
@@ -171,7 +203,8 @@ def write_psychopy(source: SurveySource, out_dir: str | Path) -> list[Path]:
 
 
 # The names this export gives its files; anything else in the folder belongs to the lab.
-_EXPORTED = re.compile(r"main_blocks\.csv|conditions/[^/]+_(test|practice|familiarization|blocks)\.csv")
+_EXPORTED = re.compile(r"main_blocks\.csv|conditions/attention_check\.csv|"
+                       r"conditions/[^/]+_(test|practice|familiarization|blocks)\.csv")
 
 
 def _remove_stale(out_dir: Path, files: dict[str, str]) -> None:

@@ -18,6 +18,11 @@ familiarisation page(s) and then a *BlockRandomizer* (``EvenPresentation``; a pl
 fixed) over *Groups* of its sub-blocks (practice + test, as above), so a main block's sub-blocks are
 always shown together and the familiarisation once before them.
 
+With ``attention_checks``, a test block holds check questions (export tags ``attention_check_1``, …) in
+fixed slots (:mod:`stimuli.survey.checks`): question randomisation is then Qualtrics's *Advanced*
+form, whose ``FixedOrder`` lists one entry per slot, ``{~Randomized~}`` where a randomly drawn test
+question goes and the check's ``QID`` where it stays.
+
 IDs are derived from the protocol name, so the same design gives a byte-identical file.
 """
 
@@ -28,16 +33,18 @@ import json
 import math
 import string
 
+from stimuli.survey.checks import CHECK_TAG, block_slots, interleave
 from stimuli.survey.plan import BlockPlan, GroupPlan, MainBlockPlan, RotationPlan, build_plan, export_tag
 from stimuli.survey.qsf_questions import descriptive, video_question
 from stimuli.survey.source import SurveySource, clip_url
 from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, consent_html, escape, instructions_html,
-                                 question_html, video_html)
+                                 attention_html, question_html, video_html)
 
 ALPHABET = string.digits + string.ascii_letters
 NEVER = "0000-00-00 00:00:00"
 ROTATION_FIELD = "arrangement_rotation"
 PROTOCOL_FIELD = "shapemotion_protocol"
+RANDOMIZED_SLOT = "{~Randomized~}"   # a FixedOrder slot that Qualtrics fills with a randomly drawn question
 
 
 def qualtrics_id(prefix: str, *parts: str) -> str:
@@ -66,6 +73,8 @@ class QsfBuilder:
         self.questions: list[dict] = []
         self.blocks: list[dict] = []
         self.flow_count = 1
+        self.checks = 0
+        self.slots: dict[int, list[int]] = {}   # id(BlockPlan) → after which test questions a check comes
 
     # -- ids ----------------------------------------------------------------------------------
     def flow_id(self) -> str:
@@ -91,18 +100,33 @@ class QsfBuilder:
         self.questions.append(video_question(self.survey_id, qid, tag, html_text, self.protocol))
         return qid
 
+    def add_check(self) -> str:
+        """An attention check question: the protocol's request, the answer buttons, forced response."""
+        qid = self.next_qid()
+        self.checks += 1
+        self.questions.append(video_question(self.survey_id, qid, CHECK_TAG.format(k=self.checks),
+                                             attention_html(self.protocol), self.protocol, check=True))
+        return qid
+
     def add_block(self, description: str, qids: list[str], randomize: str = "false", subset: int = 0,
-                  kind: str = "Standard") -> str:
+                  kind: str = "Standard", fixed: frozenset[str] = frozenset()) -> str:
         """A block; ``randomize``: ``false`` (page per question, fixed order), ``RandomWithXPerPage``
-        (all questions, random order, one per page) or ``RandomWithOnlyX`` (a random ``subset``)."""
+        (all questions, random order, one per page), ``RandomWithOnlyX`` (a random ``subset``) or
+        ``Advanced`` (a page per question; the ``fixed`` questions stay in their slots, the others are
+        drawn at random into the remaining slots)."""
         block_id = qualtrics_id("BL_", self.name, description)
         elements = []
         for qid in qids:
-            if elements and randomize == "false":
+            if elements and randomize in ("false", "Advanced"):
                 elements.append({"Type": "Page Break"})
             elements.append({"Type": "Question", "QuestionID": qid})
         options = {"BlockLocking": "false", "RandomizeQuestions": randomize, "BlockVisibility": "Expanded"}
-        if randomize == "RandomWithXPerPage":
+        if randomize == "Advanced":   # the shape of Qualtrics's own exports of "Advanced Randomization"
+            options["Randomization"] = {"Advanced": {
+                "FixedOrder": [q if q in fixed else RANDOMIZED_SLOT for q in qids],
+                "RandomizeAll": [q for q in qids if q not in fixed], "RandomSubSet": [], "Undisplayed": [],
+                "TotalRandSubset": 0, "QuestionsPerPage": 0}, "EvenPresentation": False}
+        elif randomize == "RandomWithXPerPage":
             options["Randomization"] = {"Advanced": {"QuestionsPerPage": 1}, "EvenPresentation": False}
         elif randomize == "RandomWithOnlyX":
             options["Randomization"] = {"Advanced": {"TotalRandSubset": subset, "QuestionsPerPage": 1},
@@ -139,6 +163,8 @@ def build_qsf(source: SurveySource, video_base_url: str | None = None) -> dict:
     instructions = b.add_block("Instructions", [b.add_text("instructions", instructions_html(p))])
     fields = {PROTOCOL_FIELD: p.name} | {name: "" for name in source.between}
     plans = build_plan(source)
+    for rotation in (r for g in plans for r in g.rotations):
+        b.slots |= block_slots(rotation.blocks, p.attention_checks)
     if any(r.index is not None for g in plans for r in g.rotations):
         fields[ROTATION_FIELD] = ""
     flow = [b.embedded(fields), b.block_ref(consent, "Block"), b.block_ref(instructions)]
@@ -218,8 +244,18 @@ def _block_flow(b: QsfBuilder, plan: GroupPlan, block: BlockPlan, tag: str) -> l
                                block.practice_count)
         flow += [b.block_ref(intro), b.block_ref(practice)]
     qids = [b.add_video_question(export_tag(s.stimulus_id, rep, repetitions), s) for s, rep in block.tests]
-    order = "false" if b.protocol.blocks.trials == "fixed" else "RandomWithXPerPage"   # false: as listed, a page each
-    flow.append(b.block_ref(b.add_block(f"{name} test", qids, order)))
+    checks: list[str] = []
+
+    def check() -> str:
+        checks.append(b.add_check())
+        return checks[-1]
+
+    qids = interleave(qids, b.slots.get(id(block), []), check)
+    if b.protocol.blocks.trials == "fixed":
+        order = "false"   # as listed, a page each
+    else:
+        order = "Advanced" if checks else "RandomWithXPerPage"
+    flow.append(b.block_ref(b.add_block(f"{name} test", qids, order, fixed=frozenset(checks))))
     return flow
 
 

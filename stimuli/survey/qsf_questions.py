@@ -4,7 +4,8 @@ Question kinds used by the survey export:
 
 - video question, Likert (``MC``/``SAHR``: single answer, horizontal) or forced choice (``MC``/``SAHR``,
   one choice per screen position) or ranking (``RO``/``DND``: drag and drop, one item per position);
-- descriptive text (``DB``/``TB``): consent, instructions, familiarisation clips.
+- descriptive text (``DB``/``TB``): consent, instructions, familiarisation clips;
+- attention check (``MC``/``SAHR``): the protocol's request and the usual answer buttons, no clip.
 
 Every question that shows a clip carries :data:`NEXT_AFTER_VIEW_JS`.
 """
@@ -84,12 +85,14 @@ def descriptive(survey_id: str, qid: str, tag: str, html_text: str, has_video: b
     return _element(survey_id, payload)
 
 
-def video_question(survey_id: str, qid: str, tag: str, html_text: str, protocol: Protocol) -> dict:
-    """The answer to one clip: Likert, forced choice or ranking, forced response, Next after one view."""
+def video_question(survey_id: str, qid: str, tag: str, html_text: str, protocol: Protocol,
+                   check: bool = False) -> dict:
+    """The answer to one clip: Likert, forced choice or ranking, forced response, Next after one view.
+    ``check``: an attention check instead (one answer button to pick, whatever the response type; no clip)."""
     labels = answer_labels(protocol)
     ids = [str(i) for i in range(1, len(labels) + 1)]
     choices = {i: {"Display": escape(label)} for i, label in zip(ids, labels)}
-    if protocol.response.type == "ranking":
+    if protocol.response.type == "ranking" and not check:
         payload = _base(tag, html_text, "RO", "DND", "TX")
         payload["Configuration"] |= {"Stack": False, "StackItemsInBoxes": False}
     else:
@@ -106,6 +109,7 @@ def video_question(survey_id: str, qid: str, tag: str, html_text: str, protocol:
         "QuestionID": qid,
         "RecodeValues": {i: i for i in ids},
         "DataVisibility": {"Private": False, "Hidden": False},
-        "QuestionJS": NEXT_AFTER_VIEW_JS,
     }
+    if not check:
+        payload["QuestionJS"] = NEXT_AFTER_VIEW_JS
     return _element(survey_id, payload)

@@ -14,6 +14,9 @@ The blocks are written group by group (and rotation by rotation), as in the QSF 
 practice and test blocks (the manual steps say how to nest the randomizers). A ranking is
 written as a matrix (items × rank) because the format has no rank-order question — its export columns
 (``<tag>_1`` … ``<tag>_k`` = rank of the clip at each position) match a rank-order question's.
+
+With ``attention_checks`` the test blocks hold the check questions (``attention_check_1``, …) at the
+slots :mod:`stimuli.survey.checks` gives; a manual step says to keep them there when randomising.
 """
 
 from __future__ import annotations
@@ -24,12 +27,13 @@ import re
 from stimuli.errors import StimuliError
 from stimuli.orders import block_label
 from stimuli.protocol import shown
+from stimuli.survey.checks import CHECK_TAG, block_slots
 from stimuli.survey.plan import BlockPlan, build_plan, export_tag
 from stimuli.survey.qsf import PROTOCOL_FIELD, ROTATION_FIELD
 from stimuli.survey.qsf_questions import NEXT_AFTER_VIEW_JS
 from stimuli.survey.source import SurveySource, clip_url
-from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, answer_labels, consent_html, escape,
-                                 instructions_html, question_html, video_html)
+from stimuli.survey.text import (FAMILIARIZATION_INTRO, PRACTICE_INTRO, answer_labels, attention_html, consent_html,
+                                 escape, instructions_html, question_html, video_html)
 
 
 # What ends a line of the TXT (Python's str.splitlines set): a question's text, a choice or an answer
@@ -77,6 +81,7 @@ class TxtWriter:
     def __init__(self, source: SurveySource, base_url: str | None):
         self.source, self.protocol, self.base_url = source, source.protocol, base_url
         self.lines = ["[[AdvancedFormat]]", ""]
+        self.checks = 0
 
     def clip(self, stimulus) -> str:
         p = self.protocol
@@ -90,6 +95,13 @@ class TxtWriter:
 
     def text(self, tag: str, html_text: str) -> None:
         self.lines += ["[[Question:DB]]", f"[[ID:{_tag_text(tag, 'export tag')}]]", txt_html(html_text), ""]
+
+    def check(self) -> None:
+        """An attention check: the protocol's request and the answer buttons (no clip)."""
+        self.checks += 1
+        labels = [txt_html(escape(label)) for label in answer_labels(self.protocol)]
+        self.lines += ["[[Question:MC:SingleAnswer:Horizontal]]", f"[[ID:{CHECK_TAG.format(k=self.checks)}]]",
+                       txt_html(attention_html(self.protocol)), "[[Choices]]", *labels, ""]
 
     def video_question(self, tag: str, stimulus) -> None:
         labels = [txt_html(escape(label)) for label in answer_labels(self.protocol)]
@@ -117,13 +129,14 @@ def txt_text(source: SurveySource, video_base_url: str | None = None) -> str:
     for plan in build_plan(source):
         for rotation in plan.rotations:
             suffix = f" rotation {rotation.index}" if rotation.index is not None else ""
+            slots = block_slots(rotation.blocks, p.attention_checks)
             if not rotation.main_blocks:
                 for block in rotation.blocks:
-                    _write_block(w, f"{plan.label} | {block.label}{suffix}", block)
+                    _write_block(w, f"{plan.label} | {block.label}{suffix}", block, slots.get(id(block), []))
             for main in rotation.main_blocks:           # nested: a main block's familiarisation, its sub-blocks
                 _write_familiarization(w, f"{plan.label} | {main.label}{suffix}", main.familiarization)
                 for block in main.blocks:
-                    _write_block(w, f"{plan.label} | {block.label}{suffix}", block)
+                    _write_block(w, f"{plan.label} | {block.label}{suffix}", block, slots.get(id(block), []))
     return "\n".join(w.lines).rstrip("\n") + "\n"
 
 
@@ -138,7 +151,8 @@ def _write_familiarization(w: TxtWriter, name: str, clips: list) -> None:
         w.text(s.stimulus_id, w.clip(s))
 
 
-def _write_block(w: TxtWriter, name: str, block: BlockPlan) -> None:
+def _write_block(w: TxtWriter, name: str, block: BlockPlan, checks: list[int]) -> None:
+    """A block's familiarisation, practice and test blocks; a check after each test position in ``checks``."""
     repetitions = w.protocol.repetitions
     _write_familiarization(w, name, block.familiarization)
     if block.practice_count:
@@ -154,6 +168,9 @@ def _write_block(w: TxtWriter, name: str, block: BlockPlan) -> None:
         if i:
             w.page_break()
         w.video_question(export_tag(s.stimulus_id, rep, repetitions), s)
+        if i + 1 in checks:
+            w.page_break()
+            w.check()
 
 
 def manual_steps(source: SurveySource) -> list[str]:
@@ -180,6 +197,11 @@ def manual_steps(source: SurveySource) -> list[str]:
     if p.blocks.trials == "fixed":
         steps.append("Each 'test' block: leave Block Options > Question Randomization off (blocks.trials: fixed: "
                      "the questions are imported in the protocol's fixed order, one per page).")
+    elif p.attention_checks is not None:
+        steps.append("Each 'test' block: Block Options > Question Randomization > Advanced Randomization: put the "
+                     "attention_check_… questions under 'Present in fixed order' in the places they were imported "
+                     "(they keep their slot), every other question under 'Randomize these questions' (their slots "
+                     "are filled in random order); keep the page breaks (one question per page).")
     else:
         steps.append("Each 'test' block: Block Options > Question Randomization > 'Randomly present … questions "
                      "per page' with 1 question per page (order is random within the block).")
@@ -187,7 +209,9 @@ def manual_steps(source: SurveySource) -> list[str]:
         steps.append("Each 'practice' block: Question Randomization > random order, one question per page "
                      f"(present {p.practice.per_block} of them).")
     steps.append("Every question with a clip: Add JavaScript (paste the snippet below) so that Next appears only "
-                 "after the clip has played once; make the answer questions 'Force response'.")
+                 "after the clip has played once; make the answer questions 'Force response'"
+                 + (" (the attention_check_… questions too; they have no clip and need no JavaScript)."
+                    if p.attention_checks is not None else "."))
     if p.response.type == "ranking":
         steps.append("Ranking questions were imported as matrices (rows = clips A…, columns = rank 1 = best); "
                      "add validation so that each rank is used once, or change them to Rank Order (drag and drop).")
