@@ -212,6 +212,11 @@ def test_qualtrics_import_scores_and_excludes(exp1, tmp_path, numeric):
     assert sorted(notes.loc[notes["reason"] == "attention check", "column"]) == sorted(
         f"attention_check_{k}" for k in range(1, 13))
     assert "unknown export tag" not in set(notes["reason"])
+    # ``responses inspect`` names them too
+    from analysis.responses.inspect import inspect_file
+
+    kinds = {c["name"]: c["kind"] for c in inspect_file(tmp_path / "q.csv")["columns"]}
+    assert {kinds[f"attention_check_{k}"] for k in range(1, 13)} == {"attention check"}
 
 
 def test_analyze_lists_failures_of_a_qualtrics_export(exp1, tmp_path):

@@ -60,6 +60,7 @@ def _inspect_one(path: Path) -> tuple[dict, set]:
         cols = classify_columns(raw, tags=None)
         kinds = {i: "metadata" for i in cols.metadata} | {i: "display order" for i in cols.display_order}
         kinds |= {i: "timing" for i in cols.timing} | {i: "question" for i in cols.unknown}
+        kinds |= {i: "attention check" for i in cols.attention}
         # the current export marks questions by QID ImportIds; the legacy one cannot tell them apart
         embedded = "embedded data" if raw.format == "qualtrics" else "embedded data or question"
         kinds |= {i: embedded for i in cols.embedded}
