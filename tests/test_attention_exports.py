@@ -149,6 +149,14 @@ def test_psychopy_blocks_name_the_check_slots(exp1, tmp_path):
                     "prompt": "To show that you are reading this, please select 'neutral'.",
                     "options": "|".join(LABELS)}]
     assert any("check_after" in n for n in result.notes)
+    # the replay lists: a check row where jsPsych/serve show one in that participant's list
+    replay = pd.read_csv(tmp_path / "pp" / "trials.csv", dtype=str, keep_default_na=False)
+    design = pd.read_csv(exp1 / "trials.csv", dtype=str, keep_default_na=False)
+    for pid, rows in design.groupby("participant", sort=False):
+        served = [t["kind"] for t in with_checks(rows.to_dict("records"), {"every": 10})]
+        mine = replay[replay["participant"] == pid]
+        assert mine["kind"].tolist() == served
+        assert (mine.loc[mine["kind"] == "attention_check", ["stimulus_id", "movie"]] == "").all().all()
 
 
 def test_export_all_writes_every_format(exp1, tmp_path):

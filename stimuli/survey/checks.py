@@ -51,6 +51,27 @@ def checks_per_participant(test_counts: list[int], every: int) -> int:
     return sum(len(s) for s in check_slots(test_counts, every))
 
 
+def with_check_rows(trials: list[dict], every: int) -> list[dict]:
+    """A participant's trial rows (``kind`` test/practice/…) with a check row after every ``every``-th test
+    trial, none after the last: jsPsych's rule on the seeded list. A check row has the columns of the
+    others, empty but for ``participant``, ``block``, ``block_label`` and ``kind`` = ``attention_check``.
+
+    >>> rows = [{"participant": "1", "block": "1", "kind": "test", "stimulus_id": s} for s in "abc"]
+    >>> [r["stimulus_id"] or r["kind"] for r in with_check_rows(rows, 2)]
+    ['a', 'b', 'attention_check', 'c']
+    """
+    n_tests = sum(t["kind"] == "test" for t in trials)
+    tests = 0
+    out = []
+    for trial in trials:
+        out.append(trial)
+        tests += trial["kind"] == "test"
+        if trial["kind"] == "test" and tests % every == 0 and tests < n_tests:
+            kept = {k: trial[k] for k in ("participant", "block", "block_label") if k in trial}
+            out.append({k: "" for k in trial} | kept | {"kind": "attention_check"})
+    return out
+
+
 def interleave(items: list, slots: list[int], check) -> list:
     """``items`` with ``check()``'s value after each 1-based position of ``slots``.
 

@@ -40,7 +40,8 @@ the test trials of the block (1-based, counted over the test loop's repetitions 
 check comes, space-separated (:mod:`stimuli.survey.checks`). The test loop stays random: in Builder a
 check routine follows the trial routine inside the test loop and is skipped unless
 ``str(test_loop.thisN + 1) in check_after.split()``, so the checks keep their slots while the clips
-are shuffled around them.
+are shuffled around them. ``trials.csv`` then has a row ``kind`` = ``attention_check`` (no movie) where
+jsPsych shows a check in that participant's list.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from pathlib import Path
 from stimuli.errors import StimuliError
 from stimuli.fileio import csv_text, write_all_or_nothing
 from stimuli.protocol import shown
-from stimuli.survey.checks import block_slots
+from stimuli.survey.checks import block_slots, with_check_rows
 from stimuli.survey.plan import build_plan
 from stimuli.survey.source import StimulusInfo, SurveySource
 from stimuli.survey.text import answer_labels
@@ -163,9 +164,21 @@ def psychopy_files(source: SurveySource, movie_prefix: str = "") -> dict[str, st
     files["blocks.csv"] = csv_text(blocks)
     if source.protocol.attention_checks is not None:
         files["conditions/attention_check.csv"] = csv_text([_check_row(source.protocol)])
-    files["trials.csv"] = csv_text([t | {"movie": movie_prefix + source.stimulus(t["stimulus_id"]).file}
-                                    for t in source.trials])
+    files["trials.csv"] = csv_text(_replay_rows(source, movie_prefix))
     return files
+
+
+def _replay_rows(source: SurveySource, movie_prefix: str) -> list[dict]:
+    """trials.csv's rows with their ``movie``; with attention checks also a check row (``kind`` =
+    ``attention_check``, no movie) where jsPsych shows one in that participant's list."""
+    rows = [t | {"movie": movie_prefix + source.stimulus(t["stimulus_id"]).file} for t in source.trials]
+    checks = source.protocol.attention_checks
+    if checks is None:
+        return rows
+    by_participant: dict[str, list[dict]] = {}
+    for row in rows:
+        by_participant.setdefault(str(row["participant"]), []).append(row)
+    return [r for trials in by_participant.values() for r in with_check_rows(trials, checks.every)]
 
 
 def _block_entry(source: SurveySource, files: dict[str, str], block, stem: str, movie_prefix: str,
