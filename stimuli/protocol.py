@@ -592,7 +592,8 @@ class Recruitment(Strict):
 
 
 class AttentionChecks(Strict):
-    """Instructed-response checks between the test trials of the jsPsych export: after every ``every``-th
+    """Instructed-response checks between the test trials (jsPsych and serve; the Qualtrics and PsychoPy
+    exports put them at fixed slots of the test blocks, stimuli/survey/checks.py): after every ``every``-th
     test trial a screen asks for one given answer (``prompt``'s ``{answer}`` is replaced by it) and shows
     the usual answer buttons. The data mark them ``attention_check = 1``; the response import reports the
     failed checks per participant and excludes every answer of a participant who failed
@@ -700,7 +701,7 @@ class Protocol(Strict):
     """where the design comes from (paper, section, table)"""
     recruitment: Recruitment | None = None   # shapemotion serve's platform hand-off; None: none
     """optional: hand-off to a recruitment platform (shapemotion serve)"""
-    attention_checks: AttentionChecks | None = None   # instructed-response checks (jsPsych export); None: none
+    attention_checks: AttentionChecks | None = None   # instructed-response checks (every export); None: none
     """optional: instructed-response checks between test trials (jsPsych export)"""
 
     @field_validator("name")
