@@ -145,8 +145,8 @@ def test_recursive_alias_is_refused(tmp_path, run_cli):
 
 def test_anchors_within_the_limits_still_load():
     """An alias that shares a block (one camera for two settings) is ordinary YAML and stays allowed."""
-    text = replace(EXP1, "  camera: {azimuth_deg: 35, elevation_deg: 10, distance_m: 4.0, fov_deg: 40}",
-                   "  camera: &cam {azimuth_deg: 35, elevation_deg: 10, distance_m: 4.0, fov_deg: 40}")
+    text = replace(EXP1, "  camera: {azimuth_deg: 35, elevation_deg: 10, fov_deg: 40}",
+                   "  camera: &cam {azimuth_deg: 35, elevation_deg: 10, fov_deg: 40}")
     text = replace(text, "title: Shape and motion consistency (Experiment 1)", "title: &t Shape and motion")
     text = replace(text, "source: Vyas", "consent: *t\nsource: Vyas")
     text = replace(text, "consent: >-\n  This study is about the perception of animated virtual characters. It takes "

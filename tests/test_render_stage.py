@@ -174,3 +174,78 @@ def test_belt_runs_at_the_protocols_speed_on_every_body(exp1, gait):
         shown = on_rig(_generated(actor.model_dump_json(), *args, matched, *rest), body)
         skate = skate_humos(foot_joints(shown), shown.fps, shown.metadata["belt_speed_mps"])
         assert skate <= 5.0, f"{body_actor} with {motion_actor}'s {gait}: {skate:.1f} % of frame pairs skate"
+
+
+def test_a_generated_gait_is_made_once_per_clip(exp1, monkeypatch):
+    """The speed that keeps the belt at the protocol's comes from the skeleton and the loop's frame
+    count (timing.belt_matched_speed), not from a probe gait generated first at the protocol's speed;
+    the generator's own leg length reads what the rest skeleton gives, within 0.06 %."""
+    from stimuli.motion import style
+    from stimuli.motion.generate import generated_leg_length
+    from stimuli.motion.skeleton import leg_length
+    from stimuli.render import sources
+    from stimuli.render.clip import Look
+
+    made = []
+    real = style.actor_gait
+    monkeypatch.setattr(style, "actor_gait", lambda *a, **k: made.append(a[1]) or real(*a, **k))
+    sources._generated.cache_clear()
+    look = Look("treadmill", 320, 180, exp1.clip.fps, exp1.clip.duration_s)
+    sources.actor_motion(exp1, "F_Hi1", "jog", sources.body_of(exp1, "M_Lo2"), look)
+    sources._generated.cache_clear()
+    assert made == ["jog"]
+    actor = next(a for a in exp1.actors if a.id == "F_Hi1")
+    for gait, spec in exp1.gaits.items():
+        motion = real(actor, gait, spec.cadence_spm, spec.speed_mps, exp1.seed, 30.0, 4)
+        assert leg_length(motion) == pytest.approx(generated_leg_length(actor.height_m), rel=6e-4)
+
+
+def _protocol(name):
+    from pathlib import Path
+
+    return Path(__file__).resolve().parents[1] / "protocols" / f"{name}.yaml"
+
+
+def _with_camera(tmp_path, name, camera):
+    import yaml
+
+    data = yaml.safe_load(_protocol(name).read_text())
+    data["clip"]["camera"] = camera
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_validate_warns_that_the_framing_rule_replaces_a_given_distance(tmp_path, run_cli):
+    """camera.distance_m given for a treadmill or side-by-side layout: validate says it is not used and
+    what the framing rule uses instead; the bundled protocols (which leave it out) and a row layout
+    (where it is used) get no such warning."""
+    for name in ("exp1_shape_motion", "exp2_com_vs_average"):
+        code, out, _ = run_cli("validate", _with_camera(tmp_path, name, {"azimuth_deg": 35, "distance_m": 6.0}))
+        lines = [line for line in out.splitlines() if line.startswith("warning: clip.camera.distance_m")]
+        assert code == 0 and len(lines) == 1, out
+        layout = "treadmill" if name.startswith("exp1") else "side_by_side"
+        assert f"6 m is not used on the {layout} layout" in lines[0] and "leave distance_m out" in lines[0]
+        low, high = (float(x) for x in lines[0].split(" m from the body")[0].split(", ")[-1].split("–"))
+        assert 2.0 < low < high < 5.0    # the shortest and the tallest actor's framed distance
+    for name in ("exp1_shape_motion", "exp2_com_vs_average", "thesis_mesh"):
+        code, out, _ = run_cli("validate", _protocol(name))
+        assert code == 0 and "clip.camera.distance_m" not in out, name
+    code, out, _ = run_cli("validate", _with_camera(tmp_path, "thesis_mesh", {"distance_m": 8.0, "fov_deg": 18}))
+    assert code == 0 and "clip.camera.distance_m" not in out
+
+
+def test_same_protocol_and_seed_give_the_same_clip_bytes(tmp_path):
+    """Two renders of the same Exp-1 clips (a heavy body's jog with its own arms cleared, a lean body
+    with another's walk), in this process and in fresh worker processes, give the same SHA-256."""
+    from stimuli.render import sources
+    from stimuli.render.manifest import read_manifest
+    from stimuli.render.pipeline import render_protocol
+
+    shas = []
+    for run, workers in (("a", 1), ("b", 2)):
+        sources._generated.cache_clear()
+        render_protocol(_protocol("exp1_shape_motion"), tmp_path / run, resolution="160x90", fps=10,
+                        only="M-jog-Hi2-Hi2,F-walk-Lo2-Hi1", workers=workers, progress=False, sheet=False)
+        shas.append({sid: row["sha256"] for sid, row in read_manifest(tmp_path / run).items()})
+    assert len(shas[0]) == 2 and shas[0] == shas[1]

@@ -33,6 +33,7 @@ def run_validate(args: argparse.Namespace) -> int:
     from stimuli.design import build_design
     from stimuli.motion.captures import check_captures
     from stimuli.protocol import check_capture_files, load_protocol
+    from stimuli.render.settings import camera_distance_warnings
     from stimuli.render.timing import cadence_warnings, fits_summary
 
     protocol = load_protocol(args.protocol)
@@ -54,7 +55,7 @@ def run_validate(args: argparse.Namespace) -> int:
         print(f"  {fits_summary(protocol)}")
     for line in captures:
         print(f"  capture {line}")
-    print_notes(cadence_warnings(protocol), "warning")
+    print_notes(cadence_warnings(protocol) + camera_distance_warnings(protocol, design), "warning")
     print_notes(design.notes, "note")
     return 0
 

@@ -82,6 +82,40 @@ def look_for(protocol, stimulus, resolution=None, fps=None, quick: bool = False)
                 labels_below=protocol.display.label_position == "below", label_colour=protocol.display.label_colour or "")
 
 
+def camera_distance_warnings(protocol, design) -> list[str]:
+    """``validate``'s warning when ``clip.camera.distance_m`` is given for a layout whose framing rule
+    sets the distance instead (a treadmill or side-by-side layout on a floor:
+    ``clip.placements``): the distance the rule gives for the protocol's shortest and tallest actor.
+
+    >>> from stimuli.protocol import load_protocol
+    >>> from stimuli.design import build_design
+    >>> exp1 = load_protocol("protocols/exp1_shape_motion.yaml")
+    >>> camera_distance_warnings(exp1, build_design(exp1))   # distance_m not given: nothing to say
+    []
+    """
+    import numpy as np
+
+    from stimuli.render.clip import placements
+
+    camera = protocol.clip.camera
+    if "distance_m" not in camera.model_fields_set or not design.stimuli:
+        return []
+    look = look_for(protocol, design.stimuli[0])
+    if not (look.floor and look.layout in ("treadmill", "side_by_side")):
+        return []
+    figures = max(len(s.arrangement) or 1 for s in design.stimuli) if look.layout == "side_by_side" else 1
+    heights = [a.height_m for a in protocol.actors] or [1.75]
+    used = []
+    for height in (min(heights), max(heights)):   # a clip is framed on its tallest figure
+        _, view = placements(look, figures, height)
+        used.append(float(np.linalg.norm(view.pose[:3, 3] - [0.0, 0.5 * height, 0.0])))
+    span = f"{used[0]:.2f} m" if abs(used[1] - used[0]) < 0.005 else f"{used[0]:.2f}–{used[1]:.2f} m"
+    return [f"clip.camera.distance_m: {camera.distance_m:g} m is not used on the {look.layout} layout: its framing "
+            f"rule puts the camera as near as the treadmill{'s' if figures > 1 else ''} and the bod{'ies' if figures > 1 else 'y'} allow, "
+            f"{span} from the body's middle for this protocol's actors (at azimuth_deg, elevation_deg and fov_deg "
+            f"as given); leave distance_m out"]
+
+
 @functools.lru_cache(maxsize=1)
 def upstream_digest() -> str:
     """SHA-256 of the code and bundled data that make bodies, motions and pixels (the renderer and its shaders).
