@@ -174,15 +174,43 @@ def test_physics_protocol_on_a_cluster_equals_local_and_survives_a_killed_worker
 
 
 @pytest.mark.slow
-def test_power_on_a_cluster_gives_the_local_rejections(power_design, run_cli, tmp_path):
+def test_power_and_bodies_on_a_cluster_give_the_local_results(power_design, run_cli, tmp_path):
     args = ["power", power_design, "--participants", "8", "12", "16", "--sims", "300", "--seed", "7", "--json"]
+    bodies = ["bodies", ROOT / "protocols" / "exp1_shape_motion.yaml", "--no-sheet", "--out"]
     code, local, err = run_cli(*args)
     assert code == 0, err
+    assert run_cli(*bodies, tmp_path / "bodies_local")[0] == 0
     with _cluster(tmp_path) as (address, _):
         code, dask, err = run_cli(*args, "--scheduler", address)
-    assert code == 0, err
+        assert code == 0, err
+        code, out, err_bodies = run_cli(*bodies, tmp_path / "bodies_dask", "--scheduler", address)
+        assert code == 0, err_bodies
     assert json.loads(dask) == json.loads(local)
-    assert f"dask: scheduler {address}, 2 worker(s)" in err
+    assert f"dask: scheduler {address}, 2 worker(s)" in err and "wrote 12 bodies" in out
+    files = sorted(p.relative_to(tmp_path / "bodies_local") for p in (tmp_path / "bodies_local").rglob("*"))
+    assert files == sorted(p.relative_to(tmp_path / "bodies_dask") for p in (tmp_path / "bodies_dask").rglob("*"))
+    for name in files:
+        local_file, dask_file = tmp_path / "bodies_local" / name, tmp_path / "bodies_dask" / name
+        assert local_file.is_dir() or local_file.read_bytes() == dask_file.read_bytes(), name
+
+
+@pytest.mark.slow
+def test_a_scheduler_without_workers_is_exit_2(tmp_path, run_cli, monkeypatch):
+    import shapemotion.execution as execution
+
+    monkeypatch.setattr(execution, "CONNECT_TIMEOUT_S", 2)
+    port = _free_port()
+    scheduler = subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
+                                  str(port), "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        _wait_for_port(port)
+        code, _, err = run_cli("bodies", ROOT / "protocols" / "exp1_shape_motion.yaml", "--out", tmp_path / "b",
+                               "--scheduler", f"tcp://127.0.0.1:{port}")
+    finally:
+        scheduler.kill()
+        scheduler.wait(timeout=30)
+    assert code == 2 and f"tcp://127.0.0.1:{port}: the scheduler has no workers after 2 s" in " ".join(err.split())
+    assert not (tmp_path / "b").exists()
 
 
 # -- helpers --------------------------------------------------------------------------------------
