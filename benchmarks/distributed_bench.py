@@ -106,7 +106,8 @@ def compare(name: str, make_command, folder: Path, local: list[str]) -> None:
             print(f"  ({label}: scheduler and workers connected after {startup:.1f} s, not counted below)")
             rows.append((label,) + timed(make_command(out, ["--scheduler", address]), pids))
     out = folder / f"{name}_local2"
-    rows.append(("local:2 (the command starts its cluster)",) + timed(make_command(out, ["--scheduler", "local:2"]), []))
+    local2 = timed(make_command(out, ["--scheduler", "local:2"]), [])
+    rows.append(("local:2 (the command starts its cluster)", *local2))
     base_wall, base_cpu = rows[0][1], rows[0][2]
     print(f"{name}:")
     for label, wall, cpu in rows:
