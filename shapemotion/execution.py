@@ -17,7 +17,7 @@ until a scheduler is used.
 
 >>> parse_scheduler("local:2")
 Scheduler(address=None, local_workers=2)
->>> str(parse_scheduler("tcp://127.0.0.1:8786"))
+>>> parse_scheduler("tcp://127.0.0.1:8786").address
 'tcp://127.0.0.1:8786'
 """
 
@@ -49,9 +49,6 @@ class Scheduler:
 
     address: str | None = None
     local_workers: int | None = None
-
-    def __str__(self) -> str:
-        return self.address or f"local:{self.local_workers}"
 
 
 def parse_scheduler(text: str, where: str = "--scheduler ") -> Scheduler:
@@ -106,7 +103,7 @@ def scheduler_option(option: str | None, error=SchedulerError) -> Scheduler | No
 
 @contextmanager
 def errors_as(error):
-    """Re-raise a :class:`SchedulerError` (connecting, or a cluster lost mid-run) as ``error``."""
+    """Re-raise a :class:`SchedulerError` (a bad spec, a scheduler that does not answer) as ``error``."""
     try:
         yield
     except SchedulerError as exc:
