@@ -98,6 +98,8 @@ def test_power_bad_scheduler_is_exit_2(power_design, run_cli, monkeypatch):
 def test_without_scheduler_nothing_goes_to_dask(power_design, short_protocol, tmp_path, run_cli, monkeypatch):
     """No option, no variable: the local paths run, the distributed ones are never reached."""
     import analysis.power
+    import stimuli.commands.bodies_cmd
+    import stimuli.physics.protocol_step
     import stimuli.render.pipeline
 
     monkeypatch.delenv(ENV_VAR, raising=False)
@@ -107,6 +109,8 @@ def test_without_scheduler_nothing_goes_to_dask(power_design, short_protocol, tm
 
     monkeypatch.setattr(stimuli.render.pipeline, "_run_on", refuse)
     monkeypatch.setattr(analysis.power, "_distributed_results", refuse)
+    monkeypatch.setattr(stimuli.commands.bodies_cmd, "_fit_on", refuse)
+    monkeypatch.setattr(stimuli.physics.protocol_step, "_FilesByValue", refuse)
     code, out, _ = run_cli("power", power_design, "--participants", "8", "--sims", "20", "--json")
     assert code == 0 and json.loads(out)["rows"]
     code, out, err = run_cli("render", short_protocol, "--out", tmp_path / "r", "--limit", "1", "--resolution",
@@ -114,6 +118,11 @@ def test_without_scheduler_nothing_goes_to_dask(power_design, short_protocol, tm
                              "--no-survey")
     assert code == 0, err
     assert "1 rendered" in out and "dask" not in out + err
+    code, out, err = run_cli("bodies", ROOT / "protocols" / "exp1_shape_motion.yaml", "--out", tmp_path / "b",
+                             "--no-sheet")
+    assert code == 0 and "wrote 12 bodies" in out, err
+    with stimuli.physics.protocol_step._pool(1, None, print) as pool:   # the physics step's pool: the local one
+        assert pool.submit(abs, -3).result() == 3
 
 
 # -- a real cluster: `dask scheduler` and two `dask worker` processes -------------------------------
