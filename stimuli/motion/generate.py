@@ -152,7 +152,7 @@ def loop_frames(cycles: int, cadence_spm: float, fps: float) -> int:
 def generated_leg_length(height_m: float) -> float:
     """``skeleton.leg_length`` of the generator's gaits for a stature, without generating one: thigh +
     shank + the ankle's height over a flat foot, read on the skeleton's rest pose. A gait's own
-    reading takes the 2nd percentile of its ankle height over the clip, within 0.06 % of this.
+    reading takes the 2nd percentile of its ankle height over the clip, within 0.07 % of this (Exp 1).
 
     >>> round(generated_leg_length(1.60), 4)
     0.8002

@@ -113,7 +113,7 @@ def belt_matched_speed(speed_mps: float, cadence_spm: float, cycles: int, fps: f
     the stride by the legs' ratio ``k`` (``stimuli.motion.retarget``), and ``fit_loop`` plays the
     loop ``s`` times faster to fill the clip with whole cycles (112 steps/min shown at 120 in a
     4-s clip). Generating at ``speed_mps / (k·s)`` makes the shown belt speed the protocol's for
-    every body (within 0.06 %: ``generated_leg_length``); the cadence stays the clip's, so the step
+    every body (within 0.07 %: ``generated_leg_length``); the cadence stays the clip's, so the step
     length is ``speed / cadence`` (0.60 m for a 1.2 m/s walk at 120 steps/min) for everyone. Both
     factors come from the skeleton and the frame count alone, so the gait is generated once.
     """
