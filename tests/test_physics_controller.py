@@ -273,3 +273,77 @@ def test_protocol_step_with_feedforward_chooses_gains_once_per_motion_and_caches
                                        progress=lines.append)
     assert lines == ["physics: 0 COM motion(s) to simulate, 4 cached"]
     assert [r["gain_choice"] for r in again["reports"]] == [r["gain_choice"] for r in result["reports"]]
+
+
+def test_protocol_cli_controller_option_reaches_the_protocol_step(run_cli, protocol_path, tmp_path, monkeypatch):
+    # `physics protocol --controller feedforward` runs the step with the feed-forward; pd stays the default.
+    from stimuli.physics import protocol_step
+
+    calls = []
+
+    def fake_run(*args, **kwargs):
+        calls.append(kwargs["feedforward"])
+        return {"reports": [], "figures": [], "warnings": []}
+
+    monkeypatch.setattr(protocol_step, "run_protocol", fake_run)
+    path = protocol_path("exp2_com_vs_average")
+    for extra, expected in (((), False), (("--controller", "pd"), False), (("--controller", "feedforward"), True)):
+        code, out, err = run_cli("physics", "protocol", path, "--out", tmp_path / "out", *extra)
+        assert code == 0, err
+        assert calls[-1] is expected and f"({'feedforward' if expected else 'pd'} controller)" in out
+    with pytest.raises(SystemExit) as exc:
+        run_cli("physics", "protocol", path, "--out", tmp_path / "out", "--controller", "ff")
+    assert exc.value.code == 2
+
+
+def test_pd_and_feedforward_protocol_jobs_are_cached_apart(tmp_path):
+    # The two controllers never read each other's cached COM motions; pure PD keeps its earlier keys.
+    from stimuli.physics.protocol_step import _actor_jobs
+    from stimuli.protocol import load_protocol
+
+    path, motions = _small_walk_protocol(tmp_path)
+    protocol = load_protocol(path)
+    args = (protocol, "walk", "F", motions / "F_walk.npz", (1.61, 24.4))
+    pd_jobs = _actor_jobs(*args, False, tmp_path, "gains")(None)
+    ff_jobs = _actor_jobs(*args, True, tmp_path, "gains")({"k_p": 1.0})
+    other_gains = _actor_jobs(*args, True, tmp_path, "gains")({"k_p": 2.0})
+    assert len(pd_jobs) == len(ff_jobs) == 2 and "feedforward" not in pd_jobs[0]
+    keys = [{j["out_report"] for j in jobs} for jobs in (pd_jobs, ff_jobs, other_gains)]
+    assert not keys[0] & keys[1] and not keys[1] & keys[2] and not keys[0] & keys[2]
+
+
+# The fields issue 21 asks of every clip's report, whichever controller ran.
+CLIP_FIELDS = ("flight_fraction", "reference_flight_fraction", "tracking_rms_deg", "b_m", "torque_peaks_nm", "fell",
+               "fall_reason", "fall_time_s", "controller")
+
+
+@pytest.mark.slow   # two gain choices and eight 4-s simulations in two worker processes
+def test_protocol_cli_runs_both_controllers_with_the_issue_21_report_fields(run_cli, tmp_path, monkeypatch):
+    import json
+
+    import pandas as pd
+
+    from stimuli.physics import protocol_step
+
+    monkeypatch.setattr(protocol_step, "cache_dir", lambda: tmp_path / "cache" / "physics")
+    path, motions = _small_walk_protocol(tmp_path)
+    summaries = {}
+    for controller in ("feedforward", "pd"):
+        out = tmp_path / controller
+        code, stdout, err = run_cli("physics", "protocol", path, "--out", out, "--motions", motions,
+                                    "--controller", controller)
+        assert code == 0, err
+        # the feed-forward chooses its gains first; pd then reads none of the feed-forward's cache
+        assert ("gains to choose for 2 NoCOM motion(s) first" if controller == "feedforward"
+                else "4 COM motion(s) to simulate, 0 cached") in stdout
+        for report in sorted((out / "reports").glob("COM_*.json")):
+            r = json.loads(report.read_text())
+            assert all(k in r for k in CLIP_FIELDS), [k for k in CLIP_FIELDS if k not in r]
+            assert r["controller"]["feedforward"] is (controller == "feedforward")
+            assert ("gain_choice" in r) is (controller == "feedforward")
+            assert set(r["tracking_rms_deg"]) >= {"hip.L", "knee.L", "ankle.L"}
+            assert all(p["peak"] > 0 and p["limit"] > 0 for p in r["torque_peaks_nm"].values())
+        summaries[controller] = pd.read_csv(out / "summary.csv")
+    for controller, s in summaries.items():
+        assert len(s) == 4 and (s.controller == controller).all() and not s.fell.any()
+        assert (s.reference_flight_fraction == 0).all() and s.flight_fraction.notna().all()

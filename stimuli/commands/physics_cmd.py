@@ -46,6 +46,10 @@ def register(subparsers) -> None:
     pr.add_argument("--motions", type=Path, default=None,
                     help="folder with the NoCOM average motions <sex>_<gait>.npz (default: generated walks/jogs)")
     pr.add_argument("--workers", type=int, default=2)
+    pr.add_argument("--controller", choices=CONTROLLERS, default="pd",
+                    help="pd: the paper's PD with the shipped gains of each gait (default); feedforward: PD plus the "
+                         "inverse dynamics of each NoCOM motion on its reference body, gains chosen once per NoCOM "
+                         "motion on that body and kept for its every actor (issue 21; cached apart from pd)")
     pr.add_argument("--scheduler", metavar=SCHEDULER_METAVAR, help=SCHEDULER_HELP)
     pr.set_defaults(func=run_protocol)
     t = sub.add_parser("tune", help="re-find the fixed controller gains on the base character",
@@ -58,6 +62,9 @@ def register(subparsers) -> None:
     t.set_defaults(func=run_tune)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
+
+# The protocol step's controllers (docs/readme_physics.md, Controller variants).
+CONTROLLERS = ("pd", "feedforward")
 
 # Tracking looser than the acceptance bound of the reference body (3°) is worth a word.
 TRACKING_WARN_DEG = 3.0
@@ -214,10 +221,11 @@ def run_protocol(args: argparse.Namespace) -> int:
 
     scheduler = scheduler_option(args.scheduler, StimuliError)
     with errors_as(StimuliError):
-        result = run(args.protocol, args.out, args.motions, workers=args.workers, progress=print, scheduler=scheduler)
+        result = run(args.protocol, args.out, args.motions, workers=args.workers, progress=print, scheduler=scheduler,
+                     feedforward=args.controller == "feedforward")
     for line in result["warnings"]:
         print(f"warning: {line}", file=sys.stderr)
-    print(f"{args.out}: {len(result['reports'])} COM motion(s), figures: "
+    print(f"{args.out}: {len(result['reports'])} COM motion(s) ({args.controller} controller), figures: "
           + ", ".join(str(p) for p in result["figures"]))
     return 0
 

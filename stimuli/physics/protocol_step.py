@@ -367,6 +367,15 @@ def _figures(protocol, reports: list[dict], out: Path, plot) -> list[Path]:
     return paths
 
 
+def over_limit(peaks: dict) -> str:
+    """The DoFs whose peak torque exceeds its human limit, as ``dof peak/limit`` (N·m), ';'-joined.
+
+    >>> over_limit({"knee.L": {"peak": 320.0, "limit": 250.0}, "hip.L:X": {"peak": 90.0, "limit": 250.0}})
+    'knee.L 320/250'
+    """
+    return ";".join(f"{d} {p['peak']:.0f}/{p['limit']:.0f}" for d, p in sorted(peaks.items()) if p["peak"] > p["limit"])
+
+
 def _summary(reports: list[dict], path: Path) -> None:
     import pandas as pd
 
@@ -382,5 +391,8 @@ def _summary(reports: list[dict], path: Path) -> None:
              "knee_extension_moment_peak_nm_per_kg": r.get("knee_extension_moment_peak_nm_per_kg"),
              "root_com_excursion_cm": r.get("root_com_excursion_cm"),
              "root_drift_vertical_max_m": r["root_drift"]["vertical_max_m"], "flight_fraction": r.get("flight_fraction"),
-             "fell": r["fell"]} for r in reports]   # no wall time: the same protocol gives the same bytes
+             "reference_flight_fraction": r.get("reference_flight_fraction"),
+             "controller": "feedforward" if r.get("controller", {}).get("feedforward") else "pd",
+             "torques_over_limit": over_limit(r.get("torque_peaks_nm", {})),
+             "fell": r["fell"], "fall_reason": r.get("fall_reason")} for r in reports]   # no wall time: the same protocol gives the same bytes
     pd.DataFrame(rows).sort_values(["gait", "sex", "actor"]).to_csv(path, index=False)
