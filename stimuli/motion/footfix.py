@@ -46,16 +46,32 @@ MAX_TOE_LIFT_DEG = 15.0
 TOE_LIFT_GAIN_M = 0.001
 # How long a contact's correction takes to blend in before it and out after it (4 frames at 30 fps).
 BLEND_S = 4.0 / 30.0
+# A rest pose stands if its legs are within this of straight down and its feet of level.
+STANDING_REST_DEG = 45.0
+# A foot stands flat while its ankle and its toe joint both stay put (over the belt), low.
+FLAT_FOOT_SPEED_MPS = 0.25
+FLAT_FOOT_MIN_S = 0.1
+FLAT_FOOT_BAND_M = 0.01
 
 
 def sole_points(motion: Motion, floor_y: float | None = None) -> dict[str, list[tuple[int, np.ndarray]]]:
-    """Per foot: [(joint index, offset in that joint's rest-aligned frame)] for heel, ball, toe tip.
+    """Per foot: [(joint index, offset in that joint's frame)] for heel, ball, toe tip.
 
-    The floor is the lowest rest joint unless ``floor_y`` (rest-pose coordinates, root at origin)
-    is given (e.g. from a mesh's lowest vertex).
+    Found from the rest pose where it stands (legs and feet within :data:`STANDING_REST_DEG` of
+    down and of level); the floor is then the lowest rest joint unless ``floor_y`` (rest-pose
+    coordinates, root at origin) is given (e.g. from a mesh's lowest vertex). A rig whose rest does
+    not stand (CC4: legs pointing up, toes up; Bandai: legs along x) gets them from the motion's
+    flat feet instead (:func:`standing_sole_points`).
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> pts = sole_points(generate(GaitParams(), 1.75))
+    >>> len(pts["l"]), bool(pts["l"][0][1][1] < -0.05)      # heel, ball, tip; the heel below the ankle
+    (3, True)
     """
     roles = role_indices(motion)
     rest = motion.rest_positions()
+    if not rest_stands(motion, roles, rest):
+        return standing_sole_points(motion, roles)
     y0 = rest[:, 1].min() if floor_y is None else floor_y
     out = {}
     for s in SIDES:
@@ -79,6 +95,96 @@ def sole_points(motion: Motion, floor_y: float | None = None) -> dict[str, list[
         else:
             pts.append((a, fwd + np.array([0.0, y0 - rest[a, 1], 0.0])))
         out[s] = pts
+    return out
+
+
+def _pitch_deg(v: np.ndarray) -> float:
+    """How far a direction points below the horizontal, degrees."""
+    return float(np.degrees(np.arcsin(np.clip(-v[1] / max(np.linalg.norm(v), 1e-12), -1.0, 1.0))))
+
+
+def rest_stands(motion: Motion, roles: dict | None = None, rest: np.ndarray | None = None) -> bool:
+    """Whether the rest pose (every rotation zero) stands: each hip→ankle line within
+    :data:`STANDING_REST_DEG` of straight down and each ankle→toe line within it of level.
+
+    CMU's rest legs are splayed 20° and its feet pitched 12–18°: standing. CC4's legs point up
+    (180°) and Bandai's along x (90°): sole points read off such a rest lay 1 m from the foot.
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> rest_stands(generate(GaitParams(), 1.75))
+    True
+    """
+    roles = role_indices(motion) if roles is None else roles
+    rest = motion.rest_positions() if rest is None else rest
+    for s in SIDES:
+        leg = rest[roles[f"{s}_ankle"]] - rest[roles[f"{s}_hip"]]
+        if _pitch_deg(leg) < 90.0 - STANDING_REST_DEG:
+            return False
+        toe = roles.get(f"{s}_toe")
+        if toe is not None and abs(_pitch_deg(rest[toe] - rest[roles[f"{s}_ankle"]])) > STANDING_REST_DEG:
+            return False
+    return True
+
+
+def flat_frames(motion: Motion, gpos: np.ndarray, ankle: int, toe: int) -> np.ndarray:
+    """Frames (T bool) where a foot stands flat: its ankle and toe joint both slower than
+    :data:`FLAT_FOOT_SPEED_MPS` over the ground or belt, horizontally and vertically, and both
+    within :data:`FLAT_FOOT_BAND_M` of their lowest (a heel rising slowly late in stance is not flat)."""
+    from stimuli.motion.contact import ground_speed
+
+    meta = motion.metadata
+    belt = float(meta.get("belt_speed_mps", 0.0)) if meta.get("treadmill") else 0.0
+    speed = ground_speed(gpos[:, [ankle, toe]], motion.fps, belt, bool(meta.get("looped")))
+    height = gpos[:, [ankle, toe], 1]
+    vertical = np.abs(np.gradient(height, 1.0 / motion.fps, axis=0)) if len(height) > 1 else np.zeros_like(height)
+    low = height - np.percentile(height, 5, axis=0) < FLAT_FOOT_BAND_M
+    return np.all((speed < FLAT_FOOT_SPEED_MPS) & (vertical < FLAT_FOOT_SPEED_MPS) & low, axis=1)
+
+
+def _tip_joint(motion: Motion, rest: np.ndarray, ankle: int, toe: int | None) -> int:
+    """The foot's farthest joint from the ankle in the rest pose: the toe's end site or a toe
+    bone's (CC4 has five toe bones under its ball joint), the toe joint itself, or the ankle's end."""
+    stack = [toe if toe is not None else ankle]
+    found = []
+    while stack:
+        j = stack.pop()
+        found.append(j)
+        stack.extend(motion.children(j))
+    return max(found, key=lambda j: np.linalg.norm(rest[j] - rest[ankle]))
+
+
+def standing_sole_points(motion: Motion, roles: dict | None = None) -> dict[str, list[tuple[int, np.ndarray]]]:
+    """Sole points (as :func:`sole_points`) from the motion's flat feet, for a rest that does not stand.
+
+    On each frame a foot stands flat (:func:`flat_frames`; the frames where its ankle and toe are
+    both lowest if it never does) the sole lies level with the foot's lowest joint: the heel below
+    the ankle, a quarter of the ankle→tip length back; the ball below the toe joint; the tip below
+    the foot's farthest joint. Each is carried into its joint's frame there and averaged over those
+    frames. A foot without a toe joint gets heel and tip on the ankle.
+    """
+    roles = role_indices(motion) if roles is None else roles
+    rest = motion.rest_positions()
+    grot, gpos = motion.global_transforms()
+    out = {}
+    for s in SIDES:
+        a, toe = roles[f"{s}_ankle"], roles.get(f"{s}_toe")
+        tip = _tip_joint(motion, rest, a, toe)
+        ball = toe if toe is not None else tip
+        use = flat_frames(motion, gpos, a, ball)
+        if use.sum() < max(3, FLAT_FOOT_MIN_S * motion.fps):
+            height = gpos[:, [a, ball], 1]
+            use = np.all(height <= np.percentile(height, 20, axis=0), axis=1)
+            use = use if use.any() else height.sum(axis=1) <= np.percentile(height.sum(axis=1), 10)
+        g = gpos[use]
+        floor = g[:, [a, ball, tip], 1].min(axis=1)
+        fwd = (g[:, tip] - g[:, a]) * np.array([1.0, 0.0, 1.0])
+
+        def on_floor(p):
+            return np.column_stack([p[:, 0], floor, p[:, 2]])
+
+        world = [(a, on_floor(g[:, a] - 0.25 * fwd))]
+        world += [(a, on_floor(g[:, ball])), (toe, on_floor(g[:, tip]))] if toe is not None else [(a, on_floor(g[:, tip]))]
+        out[s] = [(j, quat.rotate(quat.inv(grot[use, j]), p - g[:, j]).mean(axis=0)) for j, p in world]
     return out
 
 

@@ -33,8 +33,9 @@ from stimuli.motion import quat
 from stimuli.motion.arms import clavicle_world
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
-from stimuli.motion.contact import contact_mask, foot_contacts, ground_speed
-from stimuli.motion.footfix import clean_feet, joint_change_deg, leg_joint_indices, lock_feet, sole_positions
+from stimuli.motion.contact import contact_mask, foot_contacts
+from stimuli.motion.footfix import (clean_feet, flat_frames, joint_change_deg, leg_joint_indices, lock_feet,
+                                    sole_positions)
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
 
@@ -55,10 +56,8 @@ SPINE = ["spine05", "spine04", "spine03", "spine02", "spine01"]
 NECK = ["neck01", "neck02", "neck03", "head"]
 NEAR_GROUND_M = 0.025
 STANCE_HEIGHT_M = 0.03
-# A foot stands flat while its ankle and its toe joint both stay put (over the belt).
-FLAT_FOOT_SPEED_MPS = 0.25
+# A foot stands flat (footfix.flat_frames) for at least this long to set its turn.
 FLAT_FOOT_MIN_S = 0.1
-FLAT_FOOT_BAND_M = 0.01
 # Flat feet whose ankle→toe line is this close to the target's pitch keep the segment swing: the
 # CMU rigs (14–19°), CC4 (11–13°) and the generator (18.6°) against Anny's 15°. Turning those too
 # moved the generated walk's unstable % from 31 to 41 and the CMU walk's deepest vertex 2.5 → 9 mm.
@@ -186,7 +185,7 @@ def flat_foot_turn(source: Motion, grot: np.ndarray, gpos: np.ndarray, ankle: in
     (its toe joint sits low), Anny's 15°; swung onto that line, a Bandai foot stood on its toes all
     stance (toe tip 9 cm below the floor, heel 3 cm above) and the clean-up turned it back.
     """
-    flat = _flat(source, gpos, ankle, toe)
+    flat = flat_frames(source, gpos, ankle, toe)
     if flat.sum() < FLAT_FOOT_MIN_S * source.fps:
         return None
     segment = gpos[flat, toe] - gpos[flat, ankle]
@@ -197,18 +196,6 @@ def flat_foot_turn(source: Motion, grot: np.ndarray, gpos: np.ndarray, ankle: in
     u, _, vt = np.linalg.svd(local.mean(axis=0))
     turn = (u @ vt) @ _heading_frame(np.asarray(rest_direction, float)).T
     return quat.from_scipy(Rotation.from_matrix(turn))
-
-
-def _flat(source: Motion, gpos: np.ndarray, ankle: int, toe: int) -> np.ndarray:
-    """Frames where the foot stands flat: its ankle and toe joint both stay put over the belt."""
-    belt = float(source.metadata.get("belt_speed_mps", 0.0)) if source.metadata.get("treadmill") else 0.0
-    cyclic = bool(source.metadata.get("looped"))
-    speed = ground_speed(gpos[:, [ankle, toe]], source.fps, belt, cyclic)
-    height = gpos[:, [ankle, toe], 1]
-    vertical = np.abs(np.gradient(height, 1.0 / source.fps, axis=0))
-    # at their lowest too: a heel rising slowly in late stance is not a flat foot
-    low = height - np.percentile(height, 5, axis=0) < FLAT_FOOT_BAND_M
-    return np.all((speed < FLAT_FOOT_SPEED_MPS) & (vertical < FLAT_FOOT_SPEED_MPS) & low, axis=1)
 
 
 def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
