@@ -37,6 +37,10 @@ LAYOUT = (
     ("lower_leg.{s}", "upper_leg.{s}", "hinge", "lowerleg01.{s}", "lowerleg01.{s}", None),
     ("foot.{s}", "lower_leg.{s}", "ball", "foot.{s}", "foot.{s}", "XZY"),
 )
+# Foot–floor friction. Not a knob for the walk hop: under MuJoCo's default pyramidal friction cone
+# μ also sets the normal contact's compliance (its rows are the cone edges n ± μt), so μ = 2 "cured"
+# the hop by sinking the feet 3–5 cm into the floor (and stopped the jogs flying); with the elliptic
+# cone, where μ is only friction, μ = 2 leaves the hop as it was (docs/readme_physics.md).
 FOOT_FRICTION = 1.0
 # Foot–floor contact (MuJoCo solref: time constant s, damping ratio), set on both geoms so it is
 # not mixed with the default. Damped 1.5× critical instead of 1×: critically damped, the stiff PD
