@@ -24,7 +24,7 @@ def test_anova_markdown_with_posthoc(run_cli):
     assert code == 0, err
     assert "| GAIT | 14.28 | 1, 14 |" in out
     assert "W > J" in out
-    assert "BODY*SEX" in out
+    assert "BODY\\*SEX" in out   # stars escaped in md: not emphasis
 
 
 def test_anova_json_and_out_files(run_cli, tmp_path):
