@@ -46,6 +46,9 @@ MAX_TOE_LIFT_DEG = 15.0
 TOE_LIFT_GAIN_M = 0.001
 # How long a contact's correction takes to blend in before it and out after it (4 frames at 30 fps).
 BLEND_S = 4.0 / 30.0
+# How much faster than the source's a cleaned-up knee may turn, degrees per second (1.5° per 30-fps
+# frame; issue 20's bound on knee snapping is the capture's largest change per 30-fps frame + 2°).
+KNEE_RATE_DPS = 45.0
 # A rest pose stands if its legs are within this of straight down and its feet of level.
 STANDING_REST_DEG = 45.0
 # A foot stands flat while its ankle and its toe joint both stay put (over the belt), low.
@@ -736,6 +739,94 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
     target[todo] = _turn_about(pivot, arm, axis, angle)
     foot[todo] = quat.mul(quat.from_axis_angle(axis * angle[:, None]), foot[todo])
     return target, foot
+
+
+def least_above(x: np.ndarray, lo: np.ndarray, hi: np.ndarray, cyclic: bool = False) -> np.ndarray:
+    """The least sequence at or above ``x`` whose step from frame t to t + 1 lies in [``lo[t]``,
+    ``hi[t]``] (``lo`` ≤ 0 ≤ ``hi``): per frame, the most any frame's value forces on it
+    (McShane–Whitney, with a bound per step). A looped clip is solved on three copies of itself
+    and its middle one kept.
+
+    >>> least_above(np.array([0.0, 0.0, 6.0, 0.0]), np.full(4, -2.0), np.full(4, 2.0)).tolist()
+    [2.0, 4.0, 6.0, 4.0]
+    """
+    n = len(x)
+    x, lo, hi = (np.tile(np.asarray(v, float), 3 if cyclic else 1) for v in (x, lo, hi))
+    up, down = np.concatenate([[0.0], np.cumsum(hi[:-1])]), np.concatenate([[0.0], np.cumsum(lo[:-1])])
+    later = np.arange(len(x))[:, None] >= np.arange(len(x))[None, :]       # [t, s]: t at or after s
+    least = np.where(later, down[:, None] - down[None, :], up[:, None] - up[None, :])   # least y_t − y_s
+    out = (x[None, :] + least).max(axis=1)
+    return out[n:2 * n] if cyclic else out
+
+
+def pivot_reach(hip: np.ndarray, pivot: np.ndarray, ankle: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """Ankle positions (T×3) ``reach`` (T) from the hip that keep their distance to the foot's
+    ``pivot`` (its planted sole point), the nearest such to ``ankle``: the foot turns about its
+    pivot while the leg swings about the hip. Where no such point exists, the nearest to both.
+
+    >>> p = pivot_reach(np.array([[0.0, 1.0, 0.0]]), np.array([[0.0, 0.0, 0.1]]), np.array([[0.0, 0.1, 0.0]]),
+    ...                 np.array([0.9]))
+    >>> round(float(np.linalg.norm(p[0] - [0, 1, 0])), 6), round(float(np.linalg.norm(p[0] - [0, 0, 0.1])), 6)
+    (0.9, 0.141421)
+    """
+    arm = np.linalg.norm(ankle - pivot, axis=1)
+    axis = pivot - hip
+    d = np.maximum(np.linalg.norm(axis, axis=1), 1e-9)
+    u = axis / d[:, None]
+    # The circle where the sphere about the hip meets the one about the pivot.
+    along = np.minimum(np.clip((reach**2 - arm**2 + d**2) / (2.0 * d), d - arm, d + arm), reach)
+    radius = np.sqrt(np.maximum(reach**2 - along**2, 0.0))
+    side = (ankle - hip) - u * np.sum((ankle - hip) * u, axis=1, keepdims=True)
+    side /= np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
+    return hip + u * along[:, None] + side * radius[:, None]
+
+
+def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.ndarray], points: dict,
+                   rate_dps: float | None = None, cyclic: bool = True) -> Motion:
+    """The motion with each knee turning between two frames no more than ``reference``'s knee (the
+    motion before the clean-up) does there plus ``rate_dps`` degrees per second (:data:`KNEE_RATE_DPS`).
+
+    Why: the clean-up's corrections switch on and off with the contacts; at a walk's toe off the
+    planted toe held the foot back and the knee flexed 19° in one 30-fps frame where the capture
+    turns it 13° at most (CMU 02_01). The knee is bent further than the clean-up bent it, as little
+    as the limit allows (:func:`least_above`), and never straightened: a longer leg pushed planted
+    toes and swinging feet through the floor (by up to 11 cm on the CC4 walks). The foot keeps its
+    footprint with hip and ankle instead: a planted foot turns heel-up about its foremost sole point
+    on the floor (within :data:`~stimuli.motion.contact.LOW_BAND_M` of the lowest) while the leg
+    swings about the hip (:func:`pivot_reach`); a swinging foot rises along the hip-to-ankle line.
+    ``contacts`` maps "l"/"r" to T booleans; ``points`` as :func:`sole_points` gives them (heel first).
+    """
+    from stimuli.motion.contact import LOW_BAND_M
+    from stimuli.motion.metrics import knee_angles
+
+    margin = (KNEE_RATE_DPS if rate_dps is None else rate_dps) / motion.fps
+    roles = role_indices(motion)
+    rot, root = motion.rotations.copy(), motion.root_translation
+    grot, gpos = motion.global_transforms()
+    have, want = knee_angles(motion, gpos), knee_angles(reference)
+    for s in SIDES:
+        depart = have[s] - want[s]
+        turn = np.diff(want[s], append=want[s][:1] if cyclic else want[s][-1:])
+        bent = least_above(depart, -np.abs(turn) - margin - turn, np.abs(turn) + margin - turn, cyclic)
+        todo = bent - depart > 1e-3
+        if not todo.any():
+            continue
+        hip, knee, ankle = (gpos[:, roles[f"{s}_{j}"]] for j in ("hip", "knee", "ankle"))
+        thigh, shank = np.linalg.norm(knee - hip, axis=1), np.linalg.norm(ankle - knee, axis=1)
+        goal = np.sqrt(thigh**2 + shank**2 + 2.0 * thigh * shank * np.cos(np.radians(want[s] + bent)))
+        line = ankle - hip
+        target = hip + line * (goal / np.maximum(np.linalg.norm(line, axis=1), 1e-9))[:, None]
+        target[~todo] = ankle[~todo]
+        foot = grot[:, roles[f"{s}_ankle"]].copy()
+        down = todo & contacts[s]
+        sole = sole_positions(grot[down], gpos[down], points[s])
+        touching = sole[:, :, 1] <= sole[:, :, 1].min(axis=1, keepdims=True) + LOW_BAND_M
+        front = np.where(touching, np.arange(sole.shape[1]), -1).max(axis=1)
+        pivot = sole[np.arange(len(sole)), front]
+        target[down] = pivot_reach(hip[down], pivot, ankle[down], goal[down])
+        foot[down] = quat.mul(quat.between(pivot - ankle[down], pivot - target[down]), foot[down])
+        rot = two_bone_ik(motion, rot, root, s, target, foot)
+    return motion.replace(rotations=rot)
 
 
 # ---------------------------------------------------------------------------- whole-clip foot locking
