@@ -347,3 +347,19 @@ def test_protocol_cli_runs_both_controllers_with_the_issue_21_report_fields(run_
     for controller, s in summaries.items():
         assert len(s) == 4 and (s.controller == controller).all() and not s.fell.any()
         assert (s.reference_flight_fraction == 0).all() and s.flight_fraction.notna().all()
+
+
+def test_root_tilt_is_the_pelvis_angle_from_its_target():
+    # The report's root_tilt_deg: what the per-joint tracking cannot see (the whole body leaning).
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    from stimuli.physics.retarget import root_tilt
+
+    target = Rotation.from_euler("y", np.linspace(0, 90, 5)[:, None], degrees=True)
+    tilted = Rotation.from_euler("x", np.array([0.0, 4.0, 8.0, 12.0, 16.0])[:, None], degrees=True) * target
+    xquat = np.zeros((5, 2, 4))
+    xquat[:, 1] = tilted.as_quat()[:, [3, 0, 1, 2]]   # MuJoCo's w, x, y, z
+    sim = SimpleNamespace(body_names=["world", "pelvis"], xquat=xquat, root_target_quat=target.as_quat()[:, [3, 0, 1, 2]])
+    assert root_tilt(sim) == pytest.approx({"mean": 8.0, "max": 16.0})

@@ -44,6 +44,7 @@ class SimResult:
     xquat: np.ndarray
     xpos: np.ndarray
     root_target: np.ndarray
+    root_target_quat: np.ndarray   # the pelvis's target orientation (w, x, y, z) per recorded frame
     pelvis_com: np.ndarray
     actuator_force: np.ndarray   # every simulation step of the recorded pass × actuator (N·m)
     foot_contact: np.ndarray
@@ -147,7 +148,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         # still brakes with −k_d q̄̇, so the feed-forward carries +k_d q̄̇ (with it, a floating
         # ragdoll at 1 % of the gains follows the reference to 0.1° over a second; without, 20°+).
         tau_ff = feedforward.sample(np.arange(n_steps) * dt) - model.actuator_biasprm[:, 2] * target["qd"]
-    rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "pelvis_com")}
+    rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "root_target_quat", "pelvis_com")}
     forces = np.zeros((n_steps, model.nu))
     contact = np.zeros((n_steps, 2), bool)
     target_height = target["root_pos"][:, 1]
@@ -179,7 +180,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     out = {key: np.array(v) for key, v in rec.items()}
     if not rec["qpos"]:  # fell during the warm-up: empty arrays of the right shapes
         shapes = {"qpos": model.nq, "q": model.nu, "qref": model.nu, "xquat": (model.nbody, 4),
-                  "xpos": (model.nbody, 3), "root_target": 3, "pelvis_com": 3}
+                  "xpos": (model.nbody, 3), "root_target": 3, "root_target_quat": 4, "pelvis_com": 3}
         out = {key: np.zeros((0, *np.atleast_1d(shape))) for key, shape in shapes.items()}
     first = start_frame * k
     return SimResult(
@@ -203,6 +204,7 @@ def _record(rec: dict, data, target: dict, i: int, dof_adr: np.ndarray, pelvis: 
     rec["xquat"].append(data.xquat.copy())
     rec["xpos"].append(data.xpos.copy())
     rec["root_target"].append(target["root_pos"][i].copy())
+    rec["root_target_quat"].append(target["root_quat"][i].copy())
     rec["pelvis_com"].append(data.xipos[pelvis].copy())
 
 
