@@ -12,7 +12,9 @@ the loop took, then stops. ``--cleanup`` prints, per capture, the default clean-
 1.80 m BMI-27 man (``capture_loop`` → ``retarget`` → ``motion_quality`` on the mesh): Skate (HUMOS %),
 slip (PhysDiff/PHC mm), Penetrate mean/max and Float (mm), the largest knee flexion and the largest
 knee change between two 30-fps frames of the result and of the loop before retargeting, the largest /
-RMS joint change from the retargeted source, and the CPU seconds of retarget + clean-up; then stops.
+RMS joint change from the retargeted source, the CPU seconds of retarget + clean-up, and the share of
+the loop's frames with neither foot down by the shared contact model (``contact.foot_contacts`` on
+the capture's own skeleton: what the physics step's gain choice reads); then stops.
 Numbers only, no assertions.
 """
 
@@ -89,6 +91,7 @@ def cleanup_table() -> None:
     from stimuli.bodies import fit_body
     from stimuli.errors import StimuliError
     from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.contact import foot_contacts
     from stimuli.motion.loop import capture_loop, make_loop
     from stimuli.motion.quality import motion_quality
     from stimuli.motion.retarget import retarget
@@ -96,7 +99,7 @@ def cleanup_table() -> None:
     body = fit_body("M", 1.80, 27.0)
     files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
     print(f"{'capture':58} {'skate%':>6} {'slip':>5} {'pen':>5} {'penmax':>6} {'float':>5} {'knee':>5} {'src':>5} "
-          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5}")
+          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7}")
     for path in files:
         gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
         name = str(path.relative_to(MOCAP))
@@ -112,9 +115,11 @@ def cleanup_table() -> None:
         cpu = time.process_time() - t0
         q = motion_quality(out, body)
         (d_src, k_src), (d_out, k_out) = _knee_at_30fps(loop), _knee_at_30fps(out)
+        down = foot_contacts(loop).down
         print(f"{name:58} {q['skate_humos_pct']:6.1f} {q['skate_phc_mm']:5.2f} {q['penetrate_mm']:5.1f} "
               f"{q['penetrate_max_mm']:6.1f} {q['float_mm']:5.1f} {k_out:5.1f} {k_src:5.1f} {d_out:5.1f} {d_src:5.1f} "
-              f"{out.metadata['joint_change_max_deg']:6.1f}/{out.metadata['joint_change_rms_deg']:5.1f} {cpu:5.2f}")
+              f"{out.metadata['joint_change_max_deg']:6.1f}/{out.metadata['joint_change_rms_deg']:5.1f} {cpu:5.2f} "
+              f"{100 * (~(down['l'] | down['r'])).mean():7.1f}")
 
 
 def main() -> None:
