@@ -60,6 +60,19 @@ def test_a_rig_whose_rest_does_not_stand_reads_the_same_contacts(gait):
     assert abs(flight[0] - flight[1]) <= 0.05, flight
 
 
+# Frames down (left, right) and in flight of generated 64-frame gaits at 30 fps, read before the sole
+# points learned non-standing rests (commit b027ca0): a standing rig keeps the rest-pose route.
+GENERATED_READINGS = [("walk", 1.55, (38, 36, 0)), ("walk", 1.95, (40, 40, 0)),
+                      ("jog", 1.55, (29, 24, 11)), ("jog", 1.75, (27, 22, 15)), ("jog", 1.95, (33, 22, 9))]
+
+
+@pytest.mark.parametrize("gait,height,want", GENERATED_READINGS)
+def test_generated_gaits_read_as_before(gait, height, want):
+    c = foot_contacts(generate(GaitParams(gait=gait), height))
+    got = (int(c.down["l"].sum()), int(c.down["r"].sum()), int((~(c.down["l"] | c.down["r"])).sum()))
+    assert got == want
+
+
 @pytest.mark.parametrize("gait", ["walk", "jog"])
 def test_flat_feet_give_the_rest_pose_sole_points_on_a_standing_rig(gait):
     """The generator's rest stands with flat feet: its sole points read off the motion's flat feet are
