@@ -159,10 +159,10 @@ def _tip_joint(motion: Motion, rest: np.ndarray, ankle: int, toe: int | None) ->
 def standing_sole_points(motion: Motion, roles: dict | None = None) -> dict[str, list[tuple[int, np.ndarray]]]:
     """Sole points (as :func:`sole_points`) from the motion's flat feet, for a rest that does not stand.
 
-    On each frame a foot stands flat (:func:`flat_frames`; the frames where its ankle and toe are
-    both lowest if it never does) the sole lies level with the foot's lowest joint: the heel below
-    the ankle, a quarter of the ankle→tip length back; the ball below the toe joint; the tip below
-    the foot's farthest joint. Each is carried into its joint's frame there and averaged over those
+    On each frame a foot stands flat (:func:`flat_frames`; if fewer than :data:`FLAT_FOOT_MIN_S`,
+    the tenth of the frames where its ankle and ball joint are lowest together) the sole lies level
+    with the foot's lowest joint: the heel below the ankle, a quarter of the ankle→tip length back;
+    the ball below the toe joint; the tip below the foot's farthest joint. Each is carried into its joint's frame there and averaged over those
     frames. A foot without a toe joint gets heel and tip on the ankle.
     """
     roles = role_indices(motion) if roles is None else roles
@@ -175,9 +175,8 @@ def standing_sole_points(motion: Motion, roles: dict | None = None) -> dict[str,
         ball = toe if toe is not None else tip
         use = flat_frames(motion, gpos, a, ball)
         if use.sum() < max(3, FLAT_FOOT_MIN_S * motion.fps):
-            height = gpos[:, [a, ball], 1]
-            use = np.all(height <= np.percentile(height, 20, axis=0), axis=1)
-            use = use if use.any() else height.sum(axis=1) <= np.percentile(height.sum(axis=1), 10)
+            low = gpos[:, a, 1] + gpos[:, ball, 1]      # ankle and ball together at their lowest
+            use = low <= np.percentile(low, 10)
         g = gpos[use]
         floor = g[:, [a, ball, tip], 1].min(axis=1)
         fwd = (g[:, tip] - g[:, a]) * np.array([1.0, 0.0, 1.0])
@@ -186,7 +185,10 @@ def standing_sole_points(motion: Motion, roles: dict | None = None) -> dict[str,
             return np.column_stack([p[:, 0], floor, p[:, 2]])
 
         world = [(a, on_floor(g[:, a] - 0.25 * fwd))]
-        world += [(a, on_floor(g[:, ball])), (toe, on_floor(g[:, tip]))] if toe is not None else [(a, on_floor(g[:, tip]))]
+        if toe is not None:
+            world += [(a, on_floor(g[:, ball])), (toe, on_floor(g[:, tip]))]
+        else:
+            world.append((a, on_floor(g[:, tip])))
         out[s] = [(j, quat.rotate(quat.inv(grot[use, j]), p - g[:, j]).mean(axis=0)) for j, p in world]
     return out
 
