@@ -746,19 +746,20 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
 def least_above(x: np.ndarray, lo: np.ndarray, hi: np.ndarray, cyclic: bool = False) -> np.ndarray:
     """The least sequence at or above ``x`` whose step from frame t to t + 1 lies in [``lo[t]``,
     ``hi[t]``] (``lo`` ≤ 0 ≤ ``hi``): per frame, the most any frame's value forces on it
-    (McShane–Whitney, with a bound per step). A looped clip is solved on three copies of itself
-    and its middle one kept.
+    (McShane–Whitney, with a bound per step), by one pass forward (what earlier frames force,
+    falling at most ``lo`` a step) and one backward (later frames, rising at most ``hi``). A looped
+    clip is solved on three copies of itself and its middle one kept.
 
     >>> least_above(np.array([0.0, 0.0, 6.0, 0.0]), np.full(4, -2.0), np.full(4, 2.0)).tolist()
     [2.0, 4.0, 6.0, 4.0]
     """
     n = len(x)
-    x, lo, hi = (np.tile(np.asarray(v, float), 3 if cyclic else 1) for v in (x, lo, hi))
-    up, down = np.concatenate([[0.0], np.cumsum(hi[:-1])]), np.concatenate([[0.0], np.cumsum(lo[:-1])])
-    later = np.arange(len(x))[:, None] >= np.arange(len(x))[None, :]       # [t, s]: t at or after s
-    least = np.where(later, down[:, None] - down[None, :], up[:, None] - up[None, :])   # least y_t − y_s
-    out = (x[None, :] + least).max(axis=1)
-    return out[n:2 * n] if cyclic else out
+    y, lo, hi = (np.tile(np.asarray(v, float), 3 if cyclic else 1) for v in (x, lo, hi))
+    for t in range(1, len(y)):
+        y[t] = max(y[t], y[t - 1] + lo[t - 1])
+    for t in range(len(y) - 2, -1, -1):
+        y[t] = max(y[t], y[t + 1] - hi[t])
+    return y[n:2 * n] if cyclic else y
 
 
 def pivot_reach(hip: np.ndarray, pivot: np.ndarray, ankle: np.ndarray, reach: np.ndarray) -> np.ndarray:
