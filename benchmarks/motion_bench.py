@@ -14,7 +14,14 @@ slip (PhysDiff/PHC mm), Penetrate mean/max and Float (mm), the largest knee flex
 knee change between two 30-fps frames of the result and of the loop before retargeting, the largest /
 RMS joint change from the retargeted source, the CPU seconds of retarget + clean-up, and the share of
 the loop's frames with neither foot down by the shared contact model (``contact.foot_contacts`` on
-the capture's own skeleton: what the physics step's gain choice reads); then stops.
+the capture's own skeleton: what the physics step's gain choice reads); then stops. ``--table2``
+prints issue 20's acceptance table: every capture that loops (its gait as above), on each of
+Table 2's eight bodies (the Exp-1 test actors), against the bounds — Skate ≤ 5 % (HUMOS),
+Penetrate and Float ≤ 10 mm, walk knee-flexion peaks (each leg's largest) inside the CGM2.3
+normative walk's peak mean ± 3 SD, no T-pose frame (arm abduction under the import's 30°), loop
+seam no larger than the clip's own frame-to-frame change (``seam_error`` ratio ≤ 1) — with the
+joint change from the retargeted source and the CPU seconds of import + loop + retarget per
+capture (bound: 2 s); then the worst per file and the refusal of a capture that gives no loop.
 Numbers only, no assertions.
 """
 
@@ -122,6 +129,90 @@ def cleanup_table() -> None:
               f"{100 * (~(down['l'] | down['r'])).mean():7.1f}")
 
 
+def walk_knee_peak_band(k: float = 3.0) -> tuple[float, float]:
+    """The CGM2.3 normative walk's knee-flexion peak, mean ± ``k`` SD (the SD at the mean's peak), degrees."""
+    from stimuli.motion.normative import curve
+
+    phi = np.linspace(0.0, 1.0, 1001)
+    mean = curve("KneeAngles", "X")(phi)
+    at = phi[int(np.argmax(mean))]
+    sd = float(curve("KneeAngles", "X", "sd")(np.array([at]))[0])
+    return float(mean.max()) - k * sd, float(mean.max()) + k * sd
+
+
+def _table2_rows(loop, bodies, gait, band) -> list[dict]:
+    """One row per body: the acceptance figures of ``loop`` retargeted onto it."""
+    from stimuli.motion.bvh import EASE_IN_MIN_DEG, arm_abduction
+    from stimuli.motion.loop import seam_error
+    from stimuli.motion.metrics import knee_angles
+    from stimuli.motion.quality import motion_quality
+    from stimuli.motion.retarget import retarget
+
+    arms = float(arm_abduction(loop).max())
+    rows = []
+    for body in bodies:
+        t0 = time.process_time()
+        out = retarget(loop, body)
+        cpu = time.process_time() - t0
+        q = motion_quality(out, body)
+        peaks = [float(k.max()) for k in knee_angles(out.resample(30.0)).values()]
+        seam = seam_error(out)["ratio"]
+        fails = [name for name, bad in (
+            ("skate", q["skate_humos_pct"] > 5.0), ("pen", q["penetrate_mm"] > 10.0), ("float", q["float_mm"] > 10.0),
+            ("knee", gait == "walk" and not all(band[0] <= k <= band[1] for k in peaks)),
+            ("tpose", arms >= EASE_IN_MIN_DEG), ("seam", seam > 1.0)) if bad]
+        rows.append({"body": body.body_id, "skate": q["skate_humos_pct"], "pen": q["penetrate_mm"],
+                     "penmax": q["penetrate_max_mm"], "float": q["float_mm"], "knee_lo": min(peaks),
+                     "knee_hi": max(peaks), "arms": arms, "seam": seam, "chg_max": out.metadata["joint_change_max_deg"],
+                     "chg_rms": out.metadata["joint_change_rms_deg"], "cpu": cpu, "fails": fails})
+    return rows
+
+
+def table2() -> None:
+    """Issue 20's acceptance table: every capture × each of Table 2's bodies, then the worst per capture."""
+    from stimuli.bodies import body_for_actor
+    from stimuli.errors import StimuliError
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import capture_loop
+    from stimuli.protocol import load_protocol
+
+    proto = load_protocol(ROOT / "protocols" / "exp1_shape_motion.yaml")
+    bodies = [body_for_actor(a) for a in proto.actors if not getattr(a, "practice_only", False)]
+    band = walk_knee_peak_band()
+    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
+    print(f"Table 2's {len(bodies)} bodies; walk knee peak band (CGM2.3 mean ± 3 SD) {band[0]:.1f}–{band[1]:.1f}°; "
+          "bounds: skate ≤ 5 %, pen/float ≤ 10 mm, arms < 30°, seam ratio ≤ 1, import+loop+retarget ≤ 2 CPU s")
+    head = (f"{'capture':52} {'body':7} {'skate%':>6} {'pen':>4} {'max':>4} {'float':>5} {'knee pk':>11} {'arms':>4} "
+            f"{'seam':>4} {'chg max/rms':>11} {'cpu s':>5}  fails")
+    print(head)
+    worst = []
+    for path in files:
+        gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+        name = str(path.relative_to(MOCAP))
+        t0 = time.process_time()
+        try:
+            loop = capture_loop(read_bvh(path), gait)
+        except StimuliError as exc:
+            worst.append(f"{name:52} refused ({gait}): {exc}")
+            continue
+        base_cpu = time.process_time() - t0
+        rows = _table2_rows(loop, bodies, gait, band)
+        for r in rows:
+            print(f"{name:52} {r['body']:7} {r['skate']:6.1f} {r['pen']:4.1f} {r['penmax']:4.1f} {r['float']:5.1f} "
+                  f"{r['knee_lo']:5.1f}-{r['knee_hi']:5.1f} {r['arms']:4.0f} {r['seam']:4.2f} "
+                  f"{r['chg_max']:5.1f}/{r['chg_rms']:5.1f} {base_cpu + r['cpu']:5.2f}  {' '.join(r['fails']) or 'ok'}")
+        fails = sorted({f for r in rows for f in r["fails"]})
+        worst.append(
+            f"{name:52} {gait:4} skate ≤{max(r['skate'] for r in rows):4.1f} % pen ≤{max(r['pen'] for r in rows):4.1f} "
+            f"(deepest {max(r['penmax'] for r in rows):4.1f}) float ≤{max(r['float'] for r in rows):4.1f} mm "
+            f"knee {min(r['knee_lo'] for r in rows):5.1f}-{max(r['knee_hi'] for r in rows):5.1f}° "
+            f"arms {rows[0]['arms']:3.0f}° seam ≤{max(r['seam'] for r in rows):4.2f} "
+            f"chg ≤{max(r['chg_max'] for r in rows):5.1f}/{max(r['chg_rms'] for r in rows):4.1f}° "
+            f"cpu ≤{base_cpu + max(r['cpu'] for r in rows):4.2f} s  {'FAILS ' + ' '.join(fails) if fails else 'all met'}")
+    print("\nworst per capture over the bodies:")
+    print("\n".join(worst))
+
+
 def main() -> None:
     from stimuli.bodies import body_for_actor
     from stimuli.motion.bvh import read_bvh
@@ -178,12 +269,15 @@ if __name__ == "__main__":
     parser.add_argument("--import-only", action="store_true", help="only the import time per capture")
     parser.add_argument("--loop-only", action="store_true", help="only import + loop extraction per capture")
     parser.add_argument("--cleanup", action="store_true", help="only the clean-up's figures per capture")
+    parser.add_argument("--table2", action="store_true", help="issue 20's acceptance table on Table 2's bodies")
     args = parser.parse_args()
     np.set_printoptions(precision=3)
     if args.loop_only:
         loop_times()
     elif args.cleanup:
         cleanup_table()
+    elif args.table2:
+        table2()
     else:
         import_times()
         if not args.import_only:
