@@ -26,7 +26,7 @@ CRF = 20                   # visually lossless for these flat-shaded scenes
 PRESET = "superfast"       # ~9 ms per 720p frame (veryfast: ~17 ms for files 2.4× smaller, ~0.8 MB per 4 s)
 # One x264 thread: its default (1.5 × the machine's cores) made a clip's bytes depend on the machine
 # (frame threads change the encoding), and the render workers keep the cores busy anyway (one
-# thread costs 3–6 % less CPU per frame; it encodes a 720p frame in ~6 ms, the render takes ~28).
+# thread costs 3–7 % less CPU per frame; it encodes a 720p frame in ~6 ms, the render takes ~28).
 ENCODER_THREADS = 1
 
 
