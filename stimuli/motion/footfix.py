@@ -797,6 +797,8 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
     footprint with hip and ankle instead: a planted foot turns heel-up about its foremost sole point
     on the floor (within :data:`~stimuli.motion.contact.LOW_BAND_M` of the lowest) while the leg
     swings about the hip (:func:`pivot_reach`); a swinging foot rises along the hip-to-ankle line.
+    A knee whose largest change between frames is within the source knee's largest + the margin is
+    left untouched (generated gaits: the bound would only reshape a knee that never snaps).
     ``contacts`` maps "l"/"r" to T booleans; ``points`` as :func:`sole_points` gives them (heel first).
     """
     from stimuli.motion.contact import LOW_BAND_M
@@ -808,8 +810,14 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
     grot, gpos = motion.global_transforms()
     have, want = knee_angles(motion, gpos), knee_angles(reference)
     for s in SIDES:
-        depart = have[s] - want[s]
         turn = np.diff(want[s], append=want[s][:1] if cyclic else want[s][-1:])
+        turned = np.diff(have[s], append=have[s][:1] if cyclic else have[s][-1:])
+        # A knee the clean-up turns no faster than the source's fastest (+ the margin) has no snap to
+        # remove: left as it is (the per-frame bound still reshaped it, costing Float and stability
+        # on generated gaits for no gain in the largest change).
+        if np.abs(turned).max() <= np.abs(turn).max() + margin:
+            continue
+        depart = have[s] - want[s]
         bent = least_above(depart, -np.abs(turn) - margin - turn, np.abs(turn) + margin - turn, cyclic)
         todo = bent - depart > 1e-3
         if not todo.any():
