@@ -18,7 +18,14 @@ straight ranges, retargeted onto the sex's mean body and DTW-averaged; then PD a
 feed-forward (gains chosen per average) on the 12 bodies (``OUT/pd``, ``OUT/pd_ff``), with the
 acceptance figures (fall, flight against the average's own, tracking, b against the weight gap).
 
-    python benchmarks/physics_bench.py [--controllers OUT | --captures OUT]
+``--single-support CAPTURE ...`` (paths under ``../shared/data/mocap``) looks at each looped walk's
+single-support frames on the base character (PD + feed-forward) and splits the pelvis's distance
+below its target into its parts: the posed reference's stance foot above the floor (the target
+itself), the simulated foot's depth in the floor, and what the stance leg's joint errors and the
+pelvis's orientation error account for; beside them the stance knee's PD and feed-forward torques
+and the root spring's forward tow (issue 21's "single-support sag").
+
+    python benchmarks/physics_bench.py [--controllers OUT | --captures OUT | --single-support CAPTURE ...]
 """
 
 from __future__ import annotations
@@ -107,6 +114,83 @@ def compare_controllers(out: str, protocol: str = "protocols/exp2_com_vs_average
               f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 
+def single_support_budget(motion, body) -> dict[str, dict[str, float]]:
+    """Means over the single-support frames (``all``) and over those with the pelvis more than 2 cm
+    below its target (``sag``) of the simulated walk's pelvis height budget (m), torques (N·m) and
+    root tow (N); see the module docstring."""
+    import mujoco
+    import numpy as np
+
+    from stimuli.physics.feedforward import reference_feedforward
+    from stimuli.physics.retarget import prepare, retarget
+
+    sim = retarget(motion, body, feedforward=True).sim
+    _, _, model, gains = prepare(motion, body)   # the same model and shipped gains retarget used
+    ff = reference_feedforward(motion, body)
+    data = mujoco.MjData(model)
+    qadr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
+    k = len(sim.actuator_force) // len(sim.q)
+    fps = 1.0 / (sim.times[1] - sim.times[0])
+
+    def stance_leg(qpos, side):   # pelvis height over the foot's lowest corner, that corner's height
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        g = model.geom(f"foot.{side}").id
+        corners = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], float) * model.geom_size[g]
+        low = float((data.geom_xpos[g][:, None] + data.geom_xmat[g].reshape(3, 3) @ corners.T)[1].min())
+        return float(data.xpos[model.body("pelvis").id][1]) - low, low
+
+    rows = []
+    for i in range(1, len(sim.q) - 1):
+        down = sim.foot_contact[i * k:(i + 1) * k].mean(0) > 0.5
+        if down.sum() != 1:
+            continue
+        s = "LR"[int(np.argmax(down))]
+        qs = sim.qpos[i]
+        qr = qs.copy()
+        qr[:3], qr[3:7], qr[qadr] = sim.root_target[i], sim.root_target_quat[i], sim.qref[i]
+        h_sim, low_sim = stance_leg(qs, s)
+        h_ref, low_ref = stance_leg(qr, s)
+        parts = {}
+        for joint in ("hip", "knee", "ankle", "root"):
+            qx = qs.copy()
+            if joint == "root":
+                qx[3:7] = qr[3:7]
+            else:
+                idx = [j for j, d in enumerate(sim.dof_names) if d.startswith(f"{joint}.{s}")]
+                qx[qadr[idx]] = qr[qadr[idx]]
+            parts[joint] = stance_leg(qx, s)[0] - h_sim
+        knee = sim.dof_names.index(f"knee.{s}")
+        v_sim = (sim.qpos[i + 1, :3] - sim.qpos[i - 1, :3]) * fps / 2
+        v_ref = (sim.root_target[i + 1] - sim.root_target[i - 1]) * fps / 2
+        tow = gains.k_pf * (sim.root_target[i] - qs[:3]) + gains.k_df * (v_ref - v_sim)
+        knee_error = sim.qref[i][knee] - sim.q[i][knee]
+        rows.append({"pelvis_below_target_m": sim.root_target[i][1] - qs[1], "reference_foot_above_floor_m": low_ref,
+                     "foot_depth_m": -low_sim, "leg_joints_m": parts["hip"] + parts["knee"] + parts["ankle"],
+                     "pelvis_orientation_m": parts["root"], "knee_error_deg": np.degrees(knee_error),
+                     "knee_pd_nm": model.actuator_gainprm[knee, 0] * knee_error,
+                     "knee_feedforward_nm": ff.torque[i % len(ff.torque), knee],
+                     "knee_total_nm": sim.actuator_force[i * k:(i + 1) * k, knee].mean(),
+                     "root_tow_forward_n": tow[2], "pelvis_trail_m": sim.root_target[i][2] - qs[2]})
+    sag = [r for r in rows if r["pelvis_below_target_m"] > 0.02]
+    return {name: {key: float(np.mean([r[key] for r in group])) if group else float("nan") for key in rows[0]}
+            | {"frames": len(group)} for name, group in (("all", rows), ("sag", sag))}
+
+
+def single_support_table(captures: list[str]) -> None:
+    """Print :func:`single_support_budget` per capture (base character M 1.75 m BMI 23, 30 fps loops)."""
+    from stimuli.bodies import fit_body
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import capture_loop
+
+    body = fit_body("M", 1.75, 23.0)
+    for name in captures:
+        motion = capture_loop(read_bvh(MOCAP / name), "walk")
+        motion = motion.resample(30.0) if motion.fps > 30 else motion
+        for group, means in single_support_budget(motion, body).items():
+            print(name, group, " ".join(f"{key} {value:.4g}" for key, value in means.items()), flush=True)
+
+
 def _cpu_s(resource) -> float:
     """CPU seconds of this process and its finished child processes (the protocol step's workers)."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -119,8 +203,12 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--controllers", metavar="OUT", help="Exp-2 table of pure PD vs PD + feed-forward")
     parser.add_argument("--captures", metavar="OUT", help="the same on NoCOM averages of the real captures")
+    parser.add_argument("--single-support", nargs="+", metavar="CAPTURE",
+                        help="single-support pelvis height budget of these looped walks (../shared/data/mocap)")
     args = parser.parse_args()
-    if args.captures:
+    if args.single_support:
+        single_support_table(args.single_support)
+    elif args.captures:
         compare_controllers(args.captures, str(captures_protocol(Path(args.captures))))
     else:
         compare_controllers(args.controllers) if args.controllers else main()
