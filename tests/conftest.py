@@ -12,6 +12,26 @@ PROTOCOLS = ROOT / "protocols"
 os.environ.setdefault("SHAPEMOTION_CACHE", str(ROOT / ".cache"))
 
 
+def write_small_exp2(path: Path, waist_of_f_hi1: float | None = None) -> Path:
+    """Exp 2 cut to the walk and two actors per sex (F_Hi1, F_Lo2, M_Hi1, M_Lo2), without practice or
+    familiarization, written to ``path`` (optionally with F_Hi1's waist); returns ``path``."""
+    import yaml
+
+    data = yaml.safe_load((PROTOCOLS / "exp2_com_vs_average.yaml").read_text())
+    data["actors"] = [a for a in data["actors"] if a["id"] in ("F_Hi1", "F_Lo2", "M_Hi1", "M_Lo2")]
+    if waist_of_f_hi1:
+        data["actors"][0]["waist_m"] = waist_of_f_hi1
+    data["factors"] = [f for f in data["factors"] if f["name"] != "GAIT"]
+    for factor in data["factors"]:
+        if factor["name"] == "BODY":
+            factor.update(levels=["Hi1", "Lo2"], abbreviations={"Hi1": "H1", "Lo2": "L2"})
+    data.update(gaits={"walk": data["gaits"]["walk"]}, blocks={"by": ["SEX"], "order": "counterbalanced"})
+    for key in ("practice", "familiarization"):
+        data.pop(key)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
 @pytest.fixture
 def root() -> Path:
     return ROOT

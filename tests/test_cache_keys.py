@@ -201,19 +201,9 @@ def _small_exp2(tmp_path, monkeypatch, waist_of_f_hi1=None):
     from stimuli.physics import protocol_step
     from stimuli.protocol import load_protocol
 
-    data = yaml.safe_load((ROOT / "protocols" / "exp2_com_vs_average.yaml").read_text())
-    data["actors"] = [a for a in data["actors"] if a["id"] in ("F_Hi1", "F_Lo2", "M_Hi1", "M_Lo2")]
-    if waist_of_f_hi1:
-        data["actors"][0]["waist_m"] = waist_of_f_hi1
-    data["factors"] = [f for f in data["factors"] if f["name"] != "GAIT"]
-    for factor in data["factors"]:
-        if factor["name"] == "BODY":
-            factor.update(levels=["Hi1", "Lo2"], abbreviations={"Hi1": "H1", "Lo2": "L2"})
-    data.update(gaits={"walk": data["gaits"]["walk"]}, blocks={"by": ["SEX"], "order": "counterbalanced"})
-    for key in ("practice", "familiarization"):
-        data.pop(key)
-    path = tmp_path / "exp2_small.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    from conftest import write_small_exp2
+
+    path = write_small_exp2(tmp_path / "exp2_small.yaml", waist_of_f_hi1)
     protocol = load_protocol(path)
     motions = tmp_path / "nocom"
     for actor in (protocol.actors[0], protocol.actors[2]):   # one NoCOM walk per sex, with its own body
