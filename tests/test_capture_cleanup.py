@@ -61,7 +61,11 @@ def knee_figures(motion) -> tuple[float, float]:
 
 @pytest.mark.parametrize("name,gait", CAPTURES)
 def test_the_default_cleanup_on_a_capture(body, name, gait):
-    loop = capture_loop(read_bvh(MOCAP / name), gait)
+    assert_meets_the_bounds(capture_loop(read_bvh(MOCAP / name), gait), body, gait)
+
+
+def assert_meets_the_bounds(loop, body, gait: str):
+    """The clean-up of ``loop`` on ``body`` within the bounds in the module docstring."""
     out = retarget(loop, body)
     q = motion_quality(out, body)
     assert q["skate_humos_pct"] <= 5.0, q
@@ -113,3 +117,44 @@ def test_the_knee_rate_step_leaves_a_generated_gait_alone(body, gait, monkeypatc
     without = retarget(source, body)
     assert np.abs(with_step.rotations - without.rotations).max() < 1e-12
     assert np.abs(with_step.root_translation - without.root_translation).max() < 1e-12
+
+
+def test_the_edge_step_leaves_a_generated_gait_alone(body, monkeypatch):
+    """A generated gait's foot joint never slides faster than HUMOS's 0.5 m/s over the belt while it
+    is below 5 cm next to a contact, so ``footfix.ease_edges`` must leave it exactly as it was."""
+    import stimuli.motion.retarget as rt
+    from stimuli.motion.style import actor_gait
+    from stimuli.protocol import load_protocol
+
+    proto = load_protocol(Path(__file__).resolve().parents[1] / "protocols" / "exp1_shape_motion.yaml")
+    actor = next(a for a in proto.actors if a.id == "M_Lo1")
+    for gait in ("walk", "jog"):
+        spec = proto.gaits[gait]
+        source = actor_gait(actor, gait, spec.cadence_spm, spec.speed_mps, proto.seed, fps=30.0, cycles=2)
+        with_step = retarget(source, body)
+        monkeypatch.setattr(rt, "ease_edges", lambda motion, *args, **kwargs: motion)
+        without = retarget(source, body)
+        monkeypatch.undo()
+        assert np.array_equal(with_step.rotations, without.rotations)
+        assert np.array_equal(with_step.root_translation, without.root_translation)
+
+
+@pytest.mark.parametrize("name", ["cmu_35_17_run.bvh", "more/bandai1_run_tired_001_jog_30fps.bvh"])
+def test_a_run_on_a_womans_body_meets_skate(name, monkeypatch):
+    """Issue 20's last acceptance figure: the runs on a woman's body (Table 2's F_Hi1) within Skate
+    ≤ 5 % (HUMOS). They failed by one 20-fps pair each (7.1 %, 5.9 %): CMU 35_17's foot joint below
+    5 cm sliding 0.5–1.6 m/s over the belt the frame before touchdown, the Bandai jog's foot turned
+    over its toe at toe off. Without the landing step (``footfix.ease_edges``) 35_17 fails again."""
+    import stimuli.motion.retarget as rt
+    from stimuli.bodies import body_for_actor
+    from stimuli.protocol import load_protocol
+
+    if not MOCAP.is_dir():
+        pytest.skip(f"no captures at {MOCAP} (shared/ sits beside the clone)")
+    proto = load_protocol(Path(__file__).resolve().parents[1] / "protocols" / "exp1_shape_motion.yaml")
+    woman = body_for_actor(next(a for a in proto.actors if a.id == "F_Hi1"))
+    loop = capture_loop(read_bvh(MOCAP / name), "jog")
+    assert_meets_the_bounds(loop, woman, "jog")
+    if name.startswith("cmu_35_17"):
+        monkeypatch.setattr(rt, "ease_edges", lambda motion, *args, **kwargs: motion)
+        assert motion_quality(retarget(loop, woman), woman)["skate_humos_pct"] > 5.0

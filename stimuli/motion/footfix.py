@@ -34,6 +34,9 @@ REACH_FRACTION = 0.995
 # Largest heel rise (foot turned about its ball or toe) used to reach a trailing footprint;
 # push-off plantarflexion is 15-20° in walking and more in running.
 MAX_HEEL_RISE_DEG = 35.0
+# Most the hip-to-ankle line's heading may differ from the foot's own (backwards) for the heel to rise
+# about the line's lateral axis; beyond it the foot's lateral axis is used (see _turn_heel).
+HEEL_AXIS_OFF_DEG = 45.0
 # Shape of the swing clearance's descent (see swing_clearance).
 LANDING_POWER = 0.75
 # Clearance from the first to the last frame of swing (skating counts points within 1 cm of the
@@ -723,8 +726,17 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
     idx = planted[todo]
     pivot = target[todo] + offsets[todo, idx]
     arm = target[todo] - pivot
-    axis = np.cross(arm, np.array([0.0, 1.0, 0.0]))
+    up = np.array([0.0, 1.0, 0.0])
+    axis = np.cross(arm, up)
     axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+    # With the ankle almost over its planted toe the arm's horizontal part is short and points
+    # anywhere: turned about it, a Bandai jog's foot flipped sideways (22 cm) or over its toe at
+    # toe off. There the heel rises about the foot's own lateral axis.
+    back = -quat.rotate(foot[todo], np.array([0.0, 0.0, 1.0])) * np.array([1.0, 0.0, 1.0])
+    back /= np.maximum(np.linalg.norm(back, axis=1, keepdims=True), 1e-12)
+    flat = arm * np.array([1.0, 0.0, 1.0])
+    steep = np.einsum("ij,ij->i", flat, back) < np.cos(np.radians(HEEL_AXIS_OFF_DEG)) * np.linalg.norm(flat, axis=1)
+    axis[steep] = np.cross(back[steep], up)
     lo = np.zeros(len(todo))
     if heel_down:
         # The other sole points relative to the planted one: heel-down stops where one touches.
@@ -736,8 +748,12 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
 
         lo = _bisect(below, np.full(len(todo), -np.radians(60.0)), lo)
     # The distance to the hip shrinks as the heel rises.
+    # Such a foot rises no further than its ankle straight above the pivot (35° more took the
+    # Bandai jog's foot over its toe: the ankle 7 cm ahead of the toe tip, the ball joint sliding).
+    upright = np.arctan2(np.einsum("ij,ij->i", arm, np.cross(up, axis)), arm[:, 1])
+    hi = np.where(steep, np.clip(upright, 0.0, np.radians(MAX_HEEL_RISE_DEG)), np.radians(MAX_HEEL_RISE_DEG))
     angle = _bisect(lambda a: np.linalg.norm(_turn_about(pivot, arm, axis, a) - hip[todo], axis=1) > goal,
-                    lo, np.full(len(todo), np.radians(MAX_HEEL_RISE_DEG)))
+                    np.minimum(lo, hi), hi)
     target[todo] = _turn_about(pivot, arm, axis, angle)
     foot[todo] = quat.mul(quat.from_axis_angle(axis * angle[:, None]), foot[todo])
     return target, foot
@@ -838,6 +854,98 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
         foot[down] = quat.mul(quat.between(pivot - ankle[down], pivot - target[down]), foot[down])
         rot = two_bone_ik(motion, rot, root, s, target, foot)
     return motion.replace(rotations=rot)
+
+
+def _edge_runs(contact: np.ndarray, low: np.ndarray, cyclic: bool) -> list[tuple[int, list[int]]]:
+    """Per contact edge: (the contact's first or last frame, the swing frames next to it, nearest
+    first, while ``low``). On a loop the frames wrap round; otherwise they stop at the clip's ends."""
+    t_n, out = len(contact), []
+    if contact.all() or not contact.any():
+        return out
+    for t in range(t_n):
+        if not contact[t]:
+            continue
+        for step in (-1, 1):
+            nxt = t + step
+            if not cyclic and not 0 <= nxt < t_n or contact[nxt % t_n]:
+                continue
+            run = []
+            k = nxt
+            while (cyclic or 0 <= k < t_n) and not contact[k % t_n] and low[k % t_n] and len(run) < t_n:
+                run.append(k % t_n)
+                k += step
+            if run:
+                out.append((t, run))
+    return out
+
+
+def ease_edges(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: float = 0.0,
+               cyclic: bool = True) -> Motion:
+    """The motion with a landing foot already over its footprint while its HUMOS foot joint (the
+    ball: ``metrics.foot_joints``) is within the HUMOS height of the ground before touchdown, and a
+    lifting foot still over it while that joint is that low after toe off.
+
+    Why: the clean-up pins a foot only from the contact's first frame, so the last swing frame, its
+    foot joint already below 5 cm, still moved 0.5–1.6 m/s over the belt, and HUMOS counted that
+    20-fps pair as a skate (CMU 35_17's run on the women's bodies: 7.1 %, one pair of 14). Each such
+    frame's foot is moved horizontally by the distance that separates it from the contact's edge
+    frame on the belt; the move fades in (before a landing) or out (after a toe off) over
+    :data:`BLEND_S` seconds on the frames farther from the contact, the foot keeps its orientation
+    and height, and hip and knee reach it (:func:`two_bone_ik`). Only an edge whose low frames move
+    faster than HUMOS's speed over the belt is eased: a motion that does not skate there (every
+    generated gait) comes back unchanged.
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> m = generate(GaitParams(), 1.75)
+    >>> c = {s: np.asarray(m.metadata["contacts"][s], bool) for s in SIDES}
+    >>> ease_edges(m, c, float(m.metadata["belt_speed_mps"])) is m
+    True
+    """
+    from stimuli.motion.metrics import HUMOS_HEIGHT_M, HUMOS_SPEED_MPS
+
+    roles = role_indices(motion)
+    grot, gpos = motion.global_transforms()
+    t_n, fps = motion.n_frames, motion.fps
+    fade = blend_frames(fps)
+    rot = motion.rotations
+    for s in SIDES:
+        joint = roles.get(f"{s}_toe", roles[f"{s}_ankle"])
+        # Horizontal place on the belt (a planted foot stays put there).
+        place = gpos[:, joint][:, [0, 2]] + np.column_stack([np.zeros(t_n), np.arange(t_n) * belt_speed / fps])
+        shift = np.zeros((t_n, 2))
+        weight = np.zeros(t_n)
+        for edge, run in _edge_runs(contacts[s], gpos[:, joint, 1] < HUMOS_HEIGHT_M, cyclic):
+            # Unwrapped frame numbers, so the belt's travel across a loop's seam counts.
+            step = 1 if run[0] == (edge + 1) % t_n else -1
+            frames = [edge + step * (i + 1) for i in range(len(run))]
+            rel = np.array([_belt_place(place, f, t_n, belt_speed, fps) for f in [edge] + frames])
+            speed = np.linalg.norm(np.diff(rel, axis=0), axis=1) * fps
+            if speed.max() <= HUMOS_SPEED_MPS:
+                continue
+            held = rel[0] - rel[1:]
+            for i, f in enumerate(run):
+                shift[f], weight[f] = held[i], 1.0
+            # Fade the last move over the frames beyond the run (farther from the contact).
+            for i in range(1, fade + 1):
+                f = frames[-1] + step * i
+                if not cyclic and not 0 <= f < t_n or contacts[s][f % t_n]:
+                    break
+                w = 0.5 * (1.0 + np.cos(np.pi * i / (fade + 1)))
+                if w > weight[f % t_n]:
+                    shift[f % t_n], weight[f % t_n] = held[-1] * w, w
+        if not weight.any():
+            continue
+        ankle = roles[f"{s}_ankle"]
+        target = gpos[:, ankle].copy()
+        target[:, [0, 2]] += shift
+        rot = two_bone_ik(motion, rot, motion.root_translation, s, target, grot[:, ankle])
+    return motion if rot is motion.rotations else motion.replace(rotations=rot)
+
+
+def _belt_place(place: np.ndarray, frame: int, t_n: int, belt_speed: float, fps: float) -> np.ndarray:
+    """Where frame ``frame`` (unwrapped: may be < 0 or ≥ T on a loop) of a foot is on the belt."""
+    wraps = frame // t_n
+    return place[frame % t_n] + np.array([0.0, wraps * t_n * belt_speed / fps])
 
 
 # ---------------------------------------------------------------------------- whole-clip foot locking

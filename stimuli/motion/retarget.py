@@ -35,8 +35,8 @@ from stimuli.motion.arms import clavicle_world
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
 from stimuli.motion.contact import contact_mask, foot_contacts
-from stimuli.motion.footfix import (clean_feet, flat_frames, joint_change_deg, keep_knee_rate, leg_joint_indices,
-                                    lock_feet, sole_positions)
+from stimuli.motion.footfix import (clean_feet, ease_edges, flat_frames, joint_change_deg, keep_knee_rate,
+                                    leg_joint_indices, lock_feet, sole_positions)
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
 
@@ -405,6 +405,7 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: boo
         balanced = balance(out, contact, points=pts)
         out = clean_feet(balanced, contact, belt_speed=belt, cyclic=True, points=pts, clearance_m=0.03, iterations=3,
                          reference=out)
+    out = ease_edges(out, contact, belt_speed=belt, cyclic=cyclic)
     out = keep_knee_rate(out, m, contact, pts, cyclic=cyclic)
     if foot_lock:
         locked = foot_contacts(out, pts, floor_y=0.0)
