@@ -158,3 +158,19 @@ def test_a_run_on_a_womans_body_meets_skate(name, monkeypatch):
     if name.startswith("cmu_35_17"):
         monkeypatch.setattr(rt, "ease_edges", lambda motion, *args, **kwargs: motion)
         assert motion_quality(retarget(loop, woman), woman)["skate_humos_pct"] > 5.0
+
+
+def test_a_steep_foot_rises_about_its_own_axis_and_not_past_upright():
+    """A foot toes-down 80° with its ankle almost over its planted toe tip (8 mm aside, 2 mm behind):
+    the hip-to-ankle line's lateral axis would roll it sideways (the Bandai jog's foot moved 22 cm
+    aside at toe off); it rises about its own lateral axis instead, no further than the ankle
+    straight above the tip."""
+    from stimuli.motion.footfix import _turn_heel
+
+    foot = quat.from_axis_angle(np.array([[np.radians(80.0), 0.0, 0.0]]))
+    ankle = np.array([[0.0, 0.10, 0.0]])
+    tip = np.array([[[0.008, -0.10, 0.002]]])            # ankle-relative
+    hip = np.array([[0.0, 0.95, -0.05]])
+    moved, _ = _turn_heel(hip, ankle, tip, foot, np.array([0]), np.array([0]), np.array([0.80]), heel_down=False)
+    assert abs(moved[0, 0] - ankle[0, 0]) < 1e-6           # not sideways
+    assert moved[0, 2] <= ankle[0, 2] + tip[0, 0, 2] + 1e-6  # not ahead of the toe tip
