@@ -16,8 +16,9 @@ Method (rest-pose alignment, then clean-up):
    the belt speed scales too (recorded).
 3. Foot clean-up (``footfix``): contacts are detected on the retargeted feet (near the ground and
    slow relative to the belt), planted feet are pinned and moved at belt speed by two-bone IK, the
-   sole points come from the body mesh so the ground is at y = 0; last, each knee is kept from
-   turning faster than the source's (``footfix.keep_knee_rate``: no knee snap at contact edges).
+   sole points come from the body mesh so the ground is at y = 0; a foot whose ball slides low next
+   to a contact is held over its footprint there (``footfix.ease_edges``); last, each knee is kept
+   from turning faster than the source's (``footfix.keep_knee_rate``: no knee snap at contact edges).
 
 Twist bones, toes and fingers keep their rest orientation relative to their parents.
 """
