@@ -101,6 +101,20 @@ def scheduler_option(option: str | None, error=SchedulerError) -> Scheduler | No
         return scheduler
 
 
+def unused_workers_warning(scheduler: Scheduler | None, workers: int | None) -> str | None:
+    """The warning for ``--workers`` given with ``--scheduler`` (the cluster's workers run the tasks), else None.
+
+    >>> print(unused_workers_warning(Scheduler(local_workers=4), 2))
+    --workers 2 is not used with --scheduler: the cluster's 4 worker(s) run the tasks
+    >>> unused_workers_warning(None, 2) is None
+    True
+    """
+    if scheduler is None or workers is None:
+        return None
+    who = f"the cluster's {scheduler.local_workers} worker(s)" if scheduler.local_workers else "the cluster's workers"
+    return f"--workers {workers} is not used with --scheduler: {who} run the tasks"
+
+
 @contextmanager
 def errors_as(error):
     """Re-raise a :class:`SchedulerError` (a bad spec, a scheduler that does not answer) as ``error``."""

@@ -323,3 +323,32 @@ def _kill_once_a_task_runs(worker, prefix: str, client_process) -> bool:
             return True
         time.sleep(0.05)
     return False
+
+
+def test_execution_examples_run():
+    """The docstring examples of shapemotion.execution (scheduler specs, the unused --workers warning)."""
+    import doctest
+
+    import shapemotion.execution as execution
+
+    result = doctest.testmod(execution)
+    assert result.attempted >= 5 and result.failed == 0
+
+
+def test_workers_with_a_scheduler_is_said_to_be_unused(tmp_path, monkeypatch, capsys):
+    """``render --workers 2 --scheduler local:1`` warns that --workers is not used (the cluster runs the clips),
+    before anything is rendered; without --scheduler nothing is said."""
+    from shapemotion.execution import chosen_scheduler
+    from stimuli.cli import main
+
+    def stop_before_rendering(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("stimuli.render.pipeline.render_protocol", stop_before_rendering)
+    # the spec only, no cluster started: the warning is said before any work
+    monkeypatch.setattr("shapemotion.execution.scheduler_option", lambda option, error: chosen_scheduler(option))
+    protocol = Path(__file__).resolve().parents[1] / "protocols" / "exp1_shape_motion.yaml"
+    for extra, said in ((["--scheduler", "local:1"], True), ([], False)):
+        code = main(["render", str(protocol), "--out", str(tmp_path / "out"), "--workers", "2", *extra])
+        err = capsys.readouterr().err
+        assert code == 130 and ("--workers 2 is not used with --scheduler" in err) == said, err

@@ -45,7 +45,7 @@ def register(subparsers) -> None:
     pr.add_argument("--out", type=output_path, required=True)
     pr.add_argument("--motions", type=Path, default=None,
                     help="folder with the NoCOM average motions <sex>_<gait>.npz (default: generated walks/jogs)")
-    pr.add_argument("--workers", type=int, default=2)
+    pr.add_argument("--workers", type=int, default=None, help="parallel processes (default: 2)")
     pr.add_argument("--controller", choices=CONTROLLERS, default="pd",
                     help="pd: the paper's PD with the shipped gains of each gait (default); feedforward: PD plus the "
                          "inverse dynamics of each NoCOM motion on its reference body, gains chosen once per NoCOM "
@@ -216,12 +216,16 @@ def _write_report(path: Path, report: dict) -> None:
 
 
 def run_protocol(args: argparse.Namespace) -> int:
-    from shapemotion.execution import errors_as, scheduler_option
+    from shapemotion.execution import errors_as, scheduler_option, unused_workers_warning
     from stimuli.physics.protocol_step import run_protocol as run
 
     scheduler = scheduler_option(args.scheduler, StimuliError)
+    unused = unused_workers_warning(scheduler, args.workers)
+    if unused:
+        print(f"warning: {unused}", file=sys.stderr)
+    workers = 2 if args.workers is None else args.workers
     with errors_as(StimuliError):
-        result = run(args.protocol, args.out, args.motions, workers=args.workers, progress=print, scheduler=scheduler,
+        result = run(args.protocol, args.out, args.motions, workers=workers, progress=print, scheduler=scheduler,
                      feedforward=args.controller == "feedforward")
     for line in result["warnings"]:
         print(f"warning: {line}", file=sys.stderr)

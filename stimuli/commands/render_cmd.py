@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from shapemotion.execution import SCHEDULER_HELP, SCHEDULER_METAVAR
@@ -55,7 +56,7 @@ def register(subparsers) -> None:
 
 
 def run_render(args: argparse.Namespace) -> int:
-    from shapemotion.execution import errors_as, scheduler_option
+    from shapemotion.execution import errors_as, scheduler_option, unused_workers_warning
     from stimuli.errors import StimuliError
     from stimuli.render.manifest import verify_manifest
     from stimuli.render.pipeline import disk_full_is_a_user_error, render_protocol, survey_for_render
@@ -73,6 +74,9 @@ def run_render(args: argparse.Namespace) -> int:
         raise StimuliError("render: a PROTOCOL file is needed (only --verify works without one)")
     _check_render_options(args)
     scheduler = scheduler_option(args.scheduler, StimuliError)
+    unused = unused_workers_warning(scheduler, args.workers)
+    if unused:
+        print(f"warning: {unused}", file=sys.stderr)
     with errors_as(StimuliError):
         report = render_protocol(args.protocol, args.out, resolution=args.resolution, fps=args.fps,
                                  limit=args.limit, only=args.only, workers=args.workers, quick=args.quick,
