@@ -12,6 +12,13 @@ PROTOCOLS = ROOT / "protocols"
 os.environ.setdefault("SHAPEMOTION_CACHE", str(ROOT / ".cache"))
 
 
+def buttons_enabled(selector: str) -> str:
+    """A ``page.wait_for_function`` predicate: true once the first element matching ``selector`` exists and is
+    enabled. Null-safe: between two jsPsych trials the answer buttons are briefly absent, and a bare
+    ``document.querySelector(...).disabled`` then throws (a CI run failed on it)."""
+    return f"() => {{ const b = document.querySelector('{selector}'); return b !== null && !b.disabled; }}"
+
+
 def write_small_exp2(path: Path, waist_of_f_hi1: float | None = None) -> Path:
     """Exp 2 cut to the walk and two actors per sex (F_Hi1, F_Lo2, M_Hi1, M_Lo2), without practice or
     familiarization, written to ``path`` (optionally with F_Hi1's waist); returns ``path``."""

@@ -12,6 +12,7 @@ import json
 
 import pandas as pd
 import pytest
+from conftest import buttons_enabled
 
 from stimuli.design import build_design, design_json, write_design
 from stimuli.errors import StimuliError
@@ -94,7 +95,7 @@ def answer_everything(page, url: str, attentive: bool) -> pd.DataFrame:
         if page.evaluate(DONE):
             break
         if page.query_selector("#jspsych-video-button-response-stimulus"):
-            page.wait_for_function(f"() => !document.querySelector('{video_buttons}').disabled", timeout=10_000)
+            page.wait_for_function(buttons_enabled(video_buttons), timeout=10_000)
             page.get_by_role("button", name="Heavy").click()
         elif "please select" in page.inner_text("#jspsych-html-button-response-stimulus"):
             page.get_by_role("button", name="Medium" if attentive else "Heavy").click()

@@ -22,14 +22,13 @@ from pathlib import Path
 import httpx
 import pandas as pd
 import pytest
+from conftest import buttons_enabled
 
 from test_serve import ADMIN, PROTOCOL, free_port, start_server
 from test_survey_browser import ARGS, CHROMIUM, import_and_anova, make_clips
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 BUTTONS = "#jspsych-video-button-response-btngroup button"
-# True once the current trial's answer buttons exist and are enabled (between trials they are absent: null)
-ENABLED = f"(() => {{ const b = document.querySelector('{BUTTONS}'); return b !== null && !b.disabled; }})()"
 WAVE_ONE, WAVE_TWO = 20, 4
 ABANDON = {3, 8, 13, 18}          # leave after their first answer
 RELOAD = {2, 7, 12, 17}           # reload the page after their second answer (wave one)
@@ -62,7 +61,7 @@ async def participant(browser, url: str, n: int, log: dict, answered_event: asyn
                     return
                 await button.click()
                 continue
-            await page.wait_for_function(f"() => {ENABLED}", timeout=60_000)
+            await page.wait_for_function(buttons_enabled(BUTTONS), timeout=60_000)
             clip = await page.evaluate("window.SHAPEMOTION_STATUS.clip")
             label = ["Light", "Medium", "Heavy"][rating(n, "Hi1" if "Hi1" in clip else "Lo1") - 1]
             await page.locator(BUTTONS, has_text=label).click()
@@ -198,8 +197,8 @@ def test_a_clip_that_cannot_play_is_recorded_and_does_not_trap_the_participant(t
             page.get_by_role("button", name="I agree").click()
             page.get_by_role("button", name="Continue").click()
             for trial in range(4):      # trial i is on screen once its clip's failure is recorded
-                page.wait_for_function(f"() => window.SHAPEMOTION_STATUS.failed.length > {trial} && {ENABLED}",
-                                       timeout=30_000)
+                page.wait_for_function(f"() => window.SHAPEMOTION_STATUS.failed.length > {trial}", timeout=30_000)
+                page.wait_for_function(buttons_enabled(BUTTONS), timeout=30_000)
                 page.locator(BUTTONS, has_text="Medium").click()
             page.get_by_role("button", name="Finish").click()
             page.wait_for_function("() => window.SHAPEMOTION_STATUS.done", timeout=30_000)

@@ -19,6 +19,8 @@ import pandas as pd
 import pytest
 from scipy import stats
 
+from conftest import buttons_enabled
+
 from stimuli.design import build_design, write_design
 from stimuli.protocol import load_protocol, parse_protocol
 from stimuli.survey import export_survey
@@ -196,7 +198,7 @@ def click_through(page, url: str, participant: int, checks: dict) -> None:
         video = page.query_selector("#jspsych-video-button-response-stimulus")
         checks.setdefault("disabled_while_playing", []).append(
             page.evaluate(f"() => [...document.querySelectorAll('{buttons}')].every(b => b.disabled)"))
-        page.wait_for_function(f"() => !document.querySelector('{buttons}').disabled", timeout=10_000)
+        page.wait_for_function(buttons_enabled(buttons), timeout=10_000)
         checks.setdefault("ended_when_enabled", []).append(video.evaluate("v => v.ended"))
         body = "Hi1" if "Hi1" in page.evaluate("() => window.SHAPEMOTION_STATUS.clip") else "Lo1"
         page.get_by_role("button", name=["Light", "Medium", "Heavy"][RATINGS[participant][body] - 1]).click()

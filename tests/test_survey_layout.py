@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import buttons_enabled
 
 from stimuli.protocol import load_protocol, parse_protocol
 from tests.test_survey_browser import browser  # noqa: F401  (the fixture: Debian's Chromium)
@@ -61,7 +62,7 @@ def first_question_trial(page, url: str) -> None:
             page.wait_for_timeout(200)   # let the resize-driven layout settle
             return
         if page.query_selector(VIDEO):  # a familiarisation clip: its Continue is enabled once it has played
-            page.wait_for_function(f"() => !document.querySelector('{BUTTONS}').disabled", timeout=20_000)
+            page.wait_for_function(buttons_enabled(BUTTONS), timeout=20_000)
             page.click(BUTTONS)
         else:
             page.click("#jspsych-html-button-response-btngroup button")
