@@ -142,7 +142,8 @@ def test_the_page_waits_the_retry_after_and_sends_again(tmp_path):
     import httpx
     from playwright.sync_api import sync_playwright
 
-    from test_serve_browser import BUTTONS, ENABLED
+    from conftest import buttons_enabled
+    from test_serve_browser import BUTTONS
 
     design = make_design(tmp_path / "design")
     make_clips(design, seconds=0.5)
@@ -156,8 +157,8 @@ def test_the_page_waits_the_retry_after_and_sends_again(tmp_path):
             page.get_by_role("button", name="I agree").click()
             page.get_by_role("button", name="Continue").click()
             for trial in range(4):      # answered as soon as the buttons allow: faster than 1/s with events
-                page.wait_for_function(f"() => window.SHAPEMOTION_STATUS.position === {trial} && {ENABLED}",
-                                       timeout=30_000)
+                page.wait_for_function(f"() => window.SHAPEMOTION_STATUS.position === {trial}", timeout=30_000)
+                page.wait_for_function(buttons_enabled(BUTTONS), timeout=30_000)
                 page.locator(BUTTONS, has_text="Heavy").click()
             page.get_by_role("button", name="Finish").click()
             page.wait_for_function("() => window.SHAPEMOTION_STATUS.done", timeout=60_000)
