@@ -199,6 +199,9 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
                     report.manifest = write_manifest(out_dir, _ordered(rows, order))
                 else:
                     report.failed[sid] = error
+        except BaseException:
+            _drop_unrecorded(todo, rows)
+            raise
         finally:
             if previous_handler is not None:
                 signal.signal(signal.SIGINT, previous_handler)
@@ -210,6 +213,19 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
     if report.failed and strict:
         raise StimuliError(_failure_message(protocol, report))
     return report
+
+
+def _drop_unrecorded(todo: list[Job], rows: dict) -> None:
+    """After an interrupted run: delete the clip and poster of every job the manifest does not record.
+
+    A worker can be interrupted after its clip got its name but before its row came back (Ctrl-C
+    reaches the whole process group), and a clip of an older version of the job lost its row when the
+    run started; either file would sit in ``clips/`` unaccounted for. The rerun renders those jobs.
+    """
+    for job in todo:
+        if job.stimulus.stimulus_id not in rows:
+            job.clip.unlink(missing_ok=True)
+            job.poster.unlink(missing_ok=True)
 
 
 def survey_for_render(report: RenderReport, video_base_url=None) -> tuple[list[str], list | None]:
