@@ -23,6 +23,7 @@ from pathlib import Path
 
 from stimuli.errors import StimuliError
 from stimuli.survey import jspsych
+from stimuli.survey.checks import after_every_test
 from stimuli.survey.source import SurveySource, load_source
 
 PROLIFIC_COMPLETION = "https://app.prolific.com/submissions/complete?cc={code}"
@@ -106,15 +107,7 @@ def with_checks(trials: list[dict], attention: dict | None) -> list[dict]:
     """
     if not attention:
         return trials
-    n_tests = sum(t["kind"] == "test" for t in trials)
-    out, tests = [], 0
-    for trial in trials:
-        out.append(trial)
-        if trial["kind"] == "test":
-            tests += 1
-            if tests % attention["every"] == 0 and tests < n_tests:
-                out.append({"kind": "attention_check", "block": trial["block"]})
-    return out
+    return after_every_test(trials, attention["every"], lambda t: {"kind": "attention_check", "block": t["block"]})
 
 
 def check_answer(response_type: str, labels: list[str], positions: list[str], response, kind: str = "test"):

@@ -51,6 +51,24 @@ def checks_per_participant(test_counts: list[int], every: int) -> int:
     return sum(len(s) for s in check_slots(test_counts, every))
 
 
+def after_every_test(trials: list[dict], every: int, check) -> list[dict]:
+    """``trials`` with ``check(trial)`` after every ``every``-th test trial (``kind`` = ``test``), none after
+    the last: the static jsPsych page's rule, shared by the served lists and the PsychoPy replay lists.
+
+    >>> [t["kind"] for t in after_every_test([{"kind": "test"}] * 3, 1, lambda t: {"kind": "check"})]
+    ['test', 'check', 'test', 'check', 'test']
+    """
+    n_tests = sum(t["kind"] == "test" for t in trials)
+    tests = 0
+    out = []
+    for trial in trials:
+        out.append(trial)
+        tests += trial["kind"] == "test"
+        if trial["kind"] == "test" and tests % every == 0 and tests < n_tests:
+            out.append(check(trial))
+    return out
+
+
 def with_check_rows(trials: list[dict], every: int) -> list[dict]:
     """A participant's trial rows (``kind`` test/practice/…) with a check row after every ``every``-th test
     trial, none after the last: jsPsych's rule on the seeded list. A check row has the columns of the
@@ -60,16 +78,11 @@ def with_check_rows(trials: list[dict], every: int) -> list[dict]:
     >>> [r["stimulus_id"] or r["kind"] for r in with_check_rows(rows, 2)]
     ['a', 'b', 'attention_check', 'c']
     """
-    n_tests = sum(t["kind"] == "test" for t in trials)
-    tests = 0
-    out = []
-    for trial in trials:
-        out.append(trial)
-        tests += trial["kind"] == "test"
-        if trial["kind"] == "test" and tests % every == 0 and tests < n_tests:
-            kept = {k: trial[k] for k in ("participant", "block", "block_label") if k in trial}
-            out.append({k: "" for k in trial} | kept | {"kind": "attention_check"})
-    return out
+    def check_row(trial: dict) -> dict:
+        kept = {k: trial[k] for k in ("participant", "block", "block_label") if k in trial}
+        return {k: "" for k in trial} | kept | {"kind": "attention_check"}
+
+    return after_every_test(trials, every, check_row)
 
 
 def interleave(items: list, slots: list[int], check) -> list:
