@@ -37,11 +37,26 @@ ROOT = Path(__file__).resolve().parents[1]
 MOCAP = ROOT.parent / "shared" / "data" / "mocap"
 
 
-def import_times(repeats: int = 3) -> None:
+def capture_files(paths: list[str] | None = None) -> list[Path]:
+    """The captures to measure: ``paths`` (e.g. a lab's own files, or a hold-out kept unseen), else
+    every BVH in ``../shared/data/mocap`` and its ``more/`` folder."""
+    if paths:
+        return [Path(p) for p in paths]
+    return sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
+
+
+def _name(path: Path) -> str:
+    """A capture's label: its path under ``../shared/data/mocap``, else as given."""
+    try:
+        return str(path.resolve().relative_to(MOCAP.resolve()))
+    except ValueError:
+        return str(path)
+
+
+def import_times(files: list[Path], repeats: int = 3) -> None:
     """Best-of-``repeats`` wall time of ``read_bvh`` per capture, with the file's size and what was found."""
     from stimuli.motion.bvh import read_bvh
 
-    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
     if not files:
         print(f"import: no captures in {MOCAP} (shared/ sits beside the clone)")
         return
@@ -52,18 +67,17 @@ def import_times(repeats: int = 3) -> None:
             t0 = time.perf_counter()
             m = read_bvh(path)
             best = min(best, time.perf_counter() - t0)
-        print(f"{str(path.relative_to(MOCAP)):58} {path.stat().st_size / 1e6:5.2f} {best:8.3f} {m.fps:4.0f} "
+        print(f"{_name(path):58} {path.stat().st_size / 1e6:5.2f} {best:8.3f} {m.fps:4.0f} "
               f"{m.n_frames:6d} {m.metadata['dropped_lead_frames']:7d} {m.metadata['unit']:>5} {m.metadata['naming']}")
 
 
-def loop_times(repeats: int = 3) -> None:
+def loop_times(files: list[Path], repeats: int = 3) -> None:
     """Best-of-``repeats`` wall time of import + ``capture_loop`` per capture (walk, or jog for the
     runs and jogs), with the loop's range, cycles, belt speed and seam, or the refusal."""
     from stimuli.errors import StimuliError
     from stimuli.motion.bvh import read_bvh
     from stimuli.motion.loop import capture_loop, seam_error
 
-    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
     print(f"{'capture':58} {'import s':>8} {'loop s':>6} {'total s':>7}  loop")
     for path in files:
         gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
@@ -81,7 +95,7 @@ def loop_times(repeats: int = 3) -> None:
                 what = "refused: " + str(exc).split(": no loop: ")[-1][:90] + "…"
             t2 = time.perf_counter()
             best_import, best_loop = min(best_import, t1 - t0), min(best_loop, t2 - t1)
-        print(f"{str(path.relative_to(MOCAP)):58} {best_import:8.3f} {best_loop:6.3f} {best_import + best_loop:7.3f}  {what}")
+        print(f"{_name(path):58} {best_import:8.3f} {best_loop:6.3f} {best_import + best_loop:7.3f}  {what}")
 
 
 def _knee_at_30fps(motion) -> tuple[float, float]:
@@ -93,7 +107,7 @@ def _knee_at_30fps(motion) -> tuple[float, float]:
             max(float(k.max()) for k in knees.values()))
 
 
-def cleanup_table() -> None:
+def cleanup_table(files: list[Path]) -> None:
     """The default clean-up on every capture that loops (walk, or jog for the runs and jogs), onto a
     1.80 m BMI-27 man; a capture that gives no loop (06_10) is looped whole by ``make_loop`` and marked *."""
     from stimuli.bodies import fit_body
@@ -105,12 +119,11 @@ def cleanup_table() -> None:
     from stimuli.motion.retarget import retarget
 
     body = fit_body("M", 1.80, 27.0)
-    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
     print(f"{'capture':58} {'skate%':>6} {'slip':>5} {'pen':>5} {'penmax':>6} {'float':>5} {'knee':>5} {'src':>5} "
           f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7}")
     for path in files:
         gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
-        name = str(path.relative_to(MOCAP))
+        name = _name(path)
         capture = read_bvh(path)
         try:
             loop = capture_loop(capture, gait)
@@ -170,7 +183,7 @@ def _table2_rows(loop, bodies, gait, band) -> list[dict]:
     return rows
 
 
-def table2() -> None:
+def table2(files: list[Path]) -> None:
     """Issue 20's acceptance table: every capture × each of Table 2's bodies, then the worst per capture."""
     from stimuli.bodies import body_for_actor
     from stimuli.errors import StimuliError
@@ -181,7 +194,6 @@ def table2() -> None:
     proto = load_protocol(ROOT / "protocols" / "exp1_shape_motion.yaml")
     bodies = [body_for_actor(a) for a in proto.actors if not getattr(a, "practice_only", False)]
     band = walk_knee_peak_band()
-    files = sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
     print(f"Table 2's {len(bodies)} bodies; walk knee peak band (CGM2.3 mean ± 3 SD) {band[0]:.1f}–{band[1]:.1f}°; "
           "bounds: skate ≤ 5 %, pen/float ≤ 10 mm, arms < 30°, seam and jump ratios ≤ 1, import+loop+retarget ≤ 2 CPU s")
     head = (f"{'capture':52} {'body':7} {'skate%':>6} {'pen':>4} {'max':>4} {'float':>5} {'knee pk':>11} {'arms':>4} "
@@ -190,7 +202,7 @@ def table2() -> None:
     worst = []
     for path in files:
         gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
-        name = str(path.relative_to(MOCAP))
+        name = _name(path)
         t0 = time.process_time()
         try:
             loop = capture_loop(read_bvh(path), gait)
@@ -272,15 +284,19 @@ if __name__ == "__main__":
     parser.add_argument("--loop-only", action="store_true", help="only import + loop extraction per capture")
     parser.add_argument("--cleanup", action="store_true", help="only the clean-up's figures per capture")
     parser.add_argument("--table2", action="store_true", help="issue 20's acceptance table on Table 2's bodies")
+    parser.add_argument("--files", nargs="+", metavar="BVH",
+                        help="measure these captures instead of ../shared/data/mocap (gait from the name: "
+                             "run/jog/dash → jog, else walk)")
     args = parser.parse_args()
+    files = capture_files(args.files)
     np.set_printoptions(precision=3)
     if args.loop_only:
-        loop_times()
+        loop_times(files)
     elif args.cleanup:
-        cleanup_table()
+        cleanup_table(files)
     elif args.table2:
-        table2()
+        table2(files)
     else:
-        import_times()
+        import_times(files)
         if not args.import_only:
             main()
