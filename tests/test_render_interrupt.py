@@ -224,7 +224,9 @@ def test_killed_render_leaves_no_process_and_the_rerun_no_partial_file(tiny_prot
     out = tmp_path / "alone"
     render = _start_render_and_wait_for_workers(tiny_protocol, out, limit=6)
     workers = [line for line in _session_processes(render.pid) if "spawn_main" in line]
-    assert len(workers) == 2, _session_processes(render.pid)
+    # Set-up check (there are workers to orphan), not the property tested: on a loaded machine a
+    # fresh-clone run once saw a third spawned process of the session at this moment.
+    assert len(workers) >= 2, _session_processes(render.pid)
     os.kill(render.pid, signal.SIGKILL)
     render.wait()
     alive, took = _wait_until_gone(render.pid)

@@ -719,7 +719,8 @@ def _planted_ahead(target, offsets, foot, planted) -> np.ndarray:
 
 def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool):
     """Turn the foot of frames ``todo`` about its planted point until the ankle is ``goal`` from
-    the hip: heel-up at most :data:`MAX_HEEL_RISE_DEG`, heel-down (if allowed) until flat."""
+    the hip: heel-up at most :data:`MAX_HEEL_RISE_DEG` and no further than the ankle straight above
+    the pivot, heel-down (if allowed) until flat."""
     target, foot = target.copy(), foot.copy()
     if not len(todo):
         return target, foot
@@ -748,10 +749,12 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
 
         lo = _bisect(below, np.full(len(todo), -np.radians(60.0)), lo)
     # The distance to the hip shrinks as the heel rises.
-    # Such a foot rises no further than its ankle straight above the pivot (35° more took the
-    # Bandai jog's foot over its toe: the ankle 7 cm ahead of the toe tip, the ball joint sliding).
+    # No foot rises further than its ankle straight above the pivot (35° more took the Bandai
+    # jog's foot over its toe: the ankle 7 cm ahead of the toe tip, the ball joint sliding; on an
+    # unseen toe-less walk the foot went to 84° below level against the capture's 61° and, nearly
+    # vertical, spun 100° about its long axis in 5 frames).
     upright = np.arctan2(np.einsum("ij,ij->i", arm, np.cross(up, axis)), arm[:, 1])
-    hi = np.where(steep, np.clip(upright, 0.0, np.radians(MAX_HEEL_RISE_DEG)), np.radians(MAX_HEEL_RISE_DEG))
+    hi = np.clip(upright, 0.0, np.radians(MAX_HEEL_RISE_DEG))
     angle = _bisect(lambda a: np.linalg.norm(_turn_about(pivot, arm, axis, a) - hip[todo], axis=1) > goal,
                     np.minimum(lo, hi), hi)
     target[todo] = _turn_about(pivot, arm, axis, angle)
@@ -845,11 +848,17 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
         target = hip + line * (goal / np.maximum(np.linalg.norm(line, axis=1), 1e-9))[:, None]
         target[~todo] = ankle[~todo]
         foot = grot[:, roles[f"{s}_ankle"]].copy()
-        down = todo & contacts[s]
+        down = np.flatnonzero(todo & contacts[s])
         sole = sole_positions(grot[down], gpos[down], points[s])
         touching = sole[:, :, 1] <= sole[:, :, 1].min(axis=1, keepdims=True) + LOW_BAND_M
         front = np.where(touching, np.arange(sole.shape[1]), -1).max(axis=1)
         pivot = sole[np.arange(len(sole)), front]
+        # Only a ball or toe ahead of the ankle is a pivot: turned about the heel (a landing foot
+        # on its heel alone), the bend pitched the toes up by 29° in one frame on an unseen toe-less
+        # walk. There the foot rises along the hip-to-ankle line, as a swinging one does.
+        ahead = np.einsum("ij,ij->i", (pivot - ankle[down])[:, [0, 2]],
+                          quat.rotate(foot[down], np.array([0.0, 0.0, 1.0]))[:, [0, 2]]) > 0
+        down, pivot = down[ahead], pivot[ahead]
         target[down] = pivot_reach(hip[down], pivot, ankle[down], goal[down])
         foot[down] = quat.mul(quat.between(pivot - ankle[down], pivot - target[down]), foot[down])
         rot = two_bone_ik(motion, rot, root, s, target, foot)
