@@ -45,6 +45,11 @@ def capture_files(paths: list[str] | None = None) -> list[Path]:
     return sorted(MOCAP.glob("*.bvh")) + sorted((MOCAP / "more").glob("*.bvh"))
 
 
+def capture_gait(path: Path) -> str:
+    """The gait a capture is measured as, from its file name: jog for a run, jog or dash, else walk."""
+    return "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+
+
 def _name(path: Path) -> str:
     """A capture's label: its path under ``../shared/data/mocap``, else as given."""
     try:
@@ -80,7 +85,7 @@ def loop_times(files: list[Path], repeats: int = 3) -> None:
 
     print(f"{'capture':58} {'import s':>8} {'loop s':>6} {'total s':>7}  loop")
     for path in files:
-        gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+        gait = capture_gait(path)
         best_import = best_loop = float("inf")
         for _ in range(repeats):
             t0 = time.perf_counter()
@@ -122,7 +127,7 @@ def cleanup_table(files: list[Path]) -> None:
     print(f"{'capture':58} {'skate%':>6} {'slip':>5} {'pen':>5} {'penmax':>6} {'float':>5} {'knee':>5} {'src':>5} "
           f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7}")
     for path in files:
-        gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+        gait = capture_gait(path)
         name = _name(path)
         capture = read_bvh(path)
         try:
@@ -201,7 +206,7 @@ def table2(files: list[Path]) -> None:
     print(head)
     worst = []
     for path in files:
-        gait = "jog" if any(w in path.name for w in ("run", "jog", "dash")) else "walk"
+        gait = capture_gait(path)
         name = _name(path)
         t0 = time.process_time()
         try:

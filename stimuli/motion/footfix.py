@@ -713,8 +713,13 @@ def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np
 def _planted_ahead(target, offsets, foot, planted) -> np.ndarray:
     """Frames whose planted sole point lies ahead of the ankle (a ball or toe, not the heel)."""
     pivot = target + offsets[np.arange(len(target)), np.maximum(planted, 0)]
+    return (planted >= 0) & _ahead_of_ankle(pivot, target, foot)
+
+
+def _ahead_of_ankle(point, ankle, foot) -> np.ndarray:
+    """Per frame: ``point`` lies ahead of ``ankle`` along the foot's heading (horizontally)."""
     forward = quat.rotate(foot, np.array([0.0, 0.0, 1.0]))
-    return (planted >= 0) & (np.einsum("ij,ij->i", (pivot - target)[:, [0, 2]], forward[:, [0, 2]]) > 0)
+    return np.einsum("ij,ij->i", (point - ankle)[:, [0, 2]], forward[:, [0, 2]]) > 0
 
 
 def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool):
@@ -856,8 +861,7 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
         # Only a ball or toe ahead of the ankle is a pivot: turned about the heel (a landing foot
         # on its heel alone), the bend pitched the toes up by 29° in one frame on an unseen toe-less
         # walk. There the foot rises along the hip-to-ankle line, as a swinging one does.
-        ahead = np.einsum("ij,ij->i", (pivot - ankle[down])[:, [0, 2]],
-                          quat.rotate(foot[down], np.array([0.0, 0.0, 1.0]))[:, [0, 2]]) > 0
+        ahead = _ahead_of_ankle(pivot, ankle[down], foot[down])
         down, pivot = down[ahead], pivot[ahead]
         target[down] = pivot_reach(hip[down], pivot, ankle[down], goal[down])
         foot[down] = quat.mul(quat.between(pivot - ankle[down], pivot - target[down]), foot[down])
