@@ -104,6 +104,29 @@ def test_a_bandai_pelvis_stands_upright_on_the_body(body):
     assert abs(ankles[0] - ankles[1]) < 0.02, ankles
 
 
+def test_the_belt_is_the_speed_the_legs_carry_a_planted_foot(body, monkeypatch):
+    """CMU 07_12's legs, on this body, carry a planted foot back 10 % slower than the source's belt
+    scaled by the leg-length ratio. The clean-up moves planted feet at the recorded belt: at the
+    scaled belt it dragged them out of the legs' reach and lowered the pelvis in every double support
+    (the pelvis's rise and fall 54 → 121 mm); at the legs' own speed less than half of that is added
+    (82 mm)."""
+    import stimuli.motion.retarget as retarget_module
+    from stimuli.motion.skeleton import role_indices
+
+    def pelvis_range(motion):
+        roles = role_indices(motion)
+        p = motion.positions()
+        return float(np.ptp(0.5 * (p[:, roles["l_hip"], 1] + p[:, roles["r_hip"], 1])))
+
+    source = capture_loop(read_bvh(MOCAP / "more/cmu_07_12_brisk_walk_cc4rig_60fps_tpose_frame0.bvh"), "walk")
+    plain, cleaned = retarget(source, body, cleanup=False), retarget(source, body)
+    assert 0.85 < cleaned.metadata["belt_speed_mps"] / cleaned.metadata["belt_speed_leg_scaled_mps"] < 0.95
+    monkeypatch.setattr(retarget_module, "stance_belt_speed", lambda *args, **kwargs: None)
+    scaled = retarget(source, body)
+    assert scaled.metadata["belt_speed_mps"] == pytest.approx(scaled.metadata["belt_speed_leg_scaled_mps"])
+    assert pelvis_range(cleaned) - pelvis_range(plain) < 0.6 * (pelvis_range(scaled) - pelvis_range(plain))
+
+
 def test_rest_turn_is_one_of_the_24_axis_turns_and_keeps_posture():
     """A body lying on its side in its joint's frame is stood up by a quarter turn; a lean of 20°
     (posture, not a rest-frame convention) is left alone."""

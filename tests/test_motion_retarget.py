@@ -126,10 +126,16 @@ def test_retarget_follows_the_source_limbs(bodies, cmu_loops):
 
 
 def test_stride_scales_with_leg_length(bodies, cmu_loops):
+    """The pelvis path scales with the leg length; the belt is the speed the body's own legs carry a
+    planted foot (``stance_belt_speed``), which follows the leg length to within the proportions."""
     src = cmu_loops["cmu_35_01_walk"]
     short, tall = retarget(src, bodies["F_Lo2"]), retarget(src, bodies["M_Hi2"])
     ratio = tall.metadata["leg_scale"] / short.metadata["leg_scale"]
-    assert tall.metadata["belt_speed_mps"] / short.metadata["belt_speed_mps"] == pytest.approx(ratio)
+    scaled = [m.metadata["belt_speed_leg_scaled_mps"] for m in (short, tall)]
+    assert scaled[1] / scaled[0] == pytest.approx(ratio)
+    assert tall.metadata["belt_speed_mps"] / short.metadata["belt_speed_mps"] == pytest.approx(ratio, rel=0.03)
+    for m in (short, tall):
+        assert m.metadata["belt_speed_mps"] == pytest.approx(m.metadata["belt_speed_leg_scaled_mps"], rel=0.10)
     assert np.mean(tall.root_translation[:, 1]) > np.mean(short.root_translation[:, 1])
 
 

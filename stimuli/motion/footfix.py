@@ -542,7 +542,7 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     return out
 
 
-def _runs(contact: np.ndarray, cyclic: bool) -> tuple[int, list[tuple[int, int]]]:
+def contact_runs(contact: np.ndarray, cyclic: bool) -> tuple[int, list[tuple[int, int]]]:
     """(shift, [start, stop) contact runs of ``contact`` rolled left by shift). On a loop
     (``cyclic``) the roll starts in swing, so a contact across the clip's end is one run; otherwise
     the clip's own order, where a contact cut by its end or start is a run of its own."""
@@ -554,7 +554,7 @@ def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.5, cycl
     """0…1 per frame: how flat a foot should be — ramps up over the first ``rise`` of each contact
     (heel strike → foot flat), holds, and ramps down after ``fall`` (heel rise before push-off)."""
     out = np.zeros(len(contact))
-    shift, runs = _runs(contact, cyclic)
+    shift, runs = contact_runs(contact, cyclic)
     for s, e in runs:
         u = (np.arange(s, e) - s + 0.5) / (e - s)
         out[s:e] = np.clip(np.minimum(u / rise, (1.0 - u) / (1.0 - fall)), 0.0, 1.0)
@@ -564,7 +564,7 @@ def flat_weight(contact: np.ndarray, rise: float = 0.15, fall: float = 0.5, cycl
 def _contact_mean_yaw(yaw: np.ndarray, contact: np.ndarray, cyclic: bool = True) -> np.ndarray:
     """Heading per frame, constant (its circular mean) within each contact: a planted foot does
     not turn on the ground."""
-    shift, runs = _runs(contact, cyclic)
+    shift, runs = contact_runs(contact, cyclic)
     y = np.roll(yaw, -shift)
     for s, e in runs:
         y[s:e] = np.arctan2(np.sin(y[s:e]).mean(), np.cos(y[s:e]).mean())
@@ -577,7 +577,7 @@ def roll_weight(contact: np.ndarray, start: float = 0.5, full: float = 0.75, cyc
     out = np.zeros(len(contact))
     if contact.all():
         return out
-    shift, runs = _runs(contact, cyclic)
+    shift, runs = contact_runs(contact, cyclic)
     for s, e in runs:
         u = (np.arange(s, e) - s + 0.5) / (e - s)
         out[s:e] = np.clip((u - start) / (full - start), 0.0, 1.0)
@@ -589,7 +589,7 @@ def early_stance(contact: np.ndarray, cyclic: bool = True) -> np.ndarray:
     out = np.zeros(len(contact), bool)
     if contact.all():
         return out
-    shift, runs = _runs(contact, cyclic)
+    shift, runs = contact_runs(contact, cyclic)
     for s, e in runs:
         out[s:s + (e - s + 1) // 2] = True
     return np.roll(out, shift)
