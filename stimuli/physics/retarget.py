@@ -193,9 +193,33 @@ def _body_row(body, weight_kg: float) -> dict:
             "bmi": round(weight_kg / h**2, 3)}
 
 
+def on_reference_rig(motion, reference_body):
+    """``(motion, retargeted_here)``: a motion on another skeleton than the Anny rig (a capture) is
+    retargeted onto ``reference_body``'s rig with the foot clean-up (:func:`stimuli.motion.retarget.retarget`)
+    before it becomes the ragdoll's reference. The project's own skeletons pass unchanged: Anny-rig
+    motions (retargeted, averages of captures), whichever Anny body they were made on (the paper's
+    one reference for every body), and the generator's canonical rig (generated gaits and their
+    averages, whose feet the generator lays out itself). Runs keep their own skeleton: the clean-up
+    moved the contact model's flight share of the Bandai runs' references by 18 and 15 points (the
+    dash 0.71 → 0.54, the tired jog 0.15 → 0.00), and their simulations flew 11–26 points more than
+    those references (CMU 35_17: 0.59 against 0.44; on its own skeleton 0.45).
+
+    Why: followed bone by bone, a capture's own rest frames posed the ragdoll's feet on their sides
+    (the CC4 rig's feet rolled 69–71°, Bandai's pitched 43–53° toe down, CMU's rolled 20–21° at
+    mid-stance), stood its stance feet 1.5–2.5 cm above the floor and ran its belt 3–16 % faster
+    than its legs carry a planted foot. The retargeting lays the feet flat on the body's own soles.
+    """
+    if (list(motion.joint_names) == list(reference_body.rig.names) or motion.metadata.get("naming") == "canonical"
+            or motion_gait(motion) != "walk"):
+        return motion, False
+    from stimuli.motion.retarget import retarget as onto_rig
+
+    return onto_rig(motion, reference_body), True
+
+
 def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
              min_simulated_s: float = 4.0, rate_hz: float = DEFAULT_RATE_HZ, raise_on_fall: bool = False,
-             feedforward: bool = False, torque_limits: bool = False) -> RetargetResult:
+             feedforward: bool = False, torque_limits: bool = False, swing_placement: bool | None = None) -> RetargetResult:
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
@@ -208,13 +232,23 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     (:mod:`stimuli.physics.feedforward`) to the PD; ``torque_limits``: clamp every actuator to the
     human limits of :data:`stimuli.physics.controller.TORQUE_LIMITS_NM` (the same for every body).
     Both default off: the shipped controller is the paper's pure PD (readme: Controller variants).
-    An overground capture is looped first (:func:`loop_input`); ``result.motion`` is then the COM
-    motion of that loop.
+    ``swing_placement`` (default: with the feed-forward, on walks): each swinging foot is placed in
+    the world as the reference places it (:mod:`stimuli.physics.swing`).
+    An overground capture is looped first (:func:`loop_input`), and a capture is retargeted onto the
+    reference body's rig (:func:`on_reference_rig`); ``result.motion`` is then the COM motion of that.
     """
     weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
     inertia.check_weight(weight, float(body.anthropometry.height_m))
     motion, looped_here = loop_input(motion)
+    motion, onto_rig_here = on_reference_rig(motion, reference_body or body)
     ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
+    if swing_placement is None:
+        swing_placement = bool(feedforward) and motion_gait(motion) == "walk"
+    stance = None
+    if swing_placement:
+        from stimuli.physics.feedforward import reference_stance
+
+        stance = reference_stance(motion, ref.n_frames)
     if torque_limits:
         set_torque_limits(model)
     ff = None
@@ -223,15 +257,17 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
 
         ff = reference_feedforward(motion, reference_body or body)
     warmup_loops = max(1, int(np.ceil(min_simulated_s / ref.period - 1.0 - 1e-9)))
-    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz, feedforward=ff)
+    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz, feedforward=ff, swing_stance=stance)
     out, nocom = None, None
     if not sim.fell:
         out = to_motion(motion, body, sim, ref, ragdoll)
         nocom = joint_rms_difference(motion, out, ref, ragdoll)
     report = build_report(sim, ragdoll, body, reference_body or body, weight, gains, nocom)
-    report["controller"] = {"feedforward": bool(feedforward), "torque_limits": bool(torque_limits)}
+    report["controller"] = {"feedforward": bool(feedforward), "torque_limits": bool(torque_limits),
+                            "swing_placement": bool(swing_placement)}
     report["reference_flight_fraction"] = reference_flight_fraction(motion)
     report["looped_input"] = looped_here
+    report["retargeted_onto_reference_rig"] = onto_rig_here
     result = RetargetResult(out, report, sim, ref, ragdoll)
     if sim.fell and raise_on_fall:
         err = RagdollFellError(f"the ragdoll of body {body.body_id} ({weight:.1f} kg) fell at "

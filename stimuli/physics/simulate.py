@@ -113,13 +113,15 @@ def ground_offset(model, ref, n: int = 60) -> float:
 
 
 def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = DEFAULT_RATE_HZ,
-             duration_s: float | None = None, feedforward=None) -> SimResult:
+             duration_s: float | None = None, feedforward=None, swing_stance: np.ndarray | None = None) -> SimResult:
     """Track ``ref`` with the ragdoll ``model``; record the loop after ``warmup_loops`` passes.
 
     ``duration_s`` (optional) records that long instead of one loop (benchmarks, tests).
     ``feedforward`` (a :class:`stimuli.physics.feedforward.Feedforward` of the same DoFs): its
     torques are added to the PD's inside each actuator (its constant bias term), so the
     actuator's force range, when set, limits the sum.
+    ``swing_stance`` (frame × 2, the reference's stance per foot): place each swinging foot in the
+    world as the reference does (:mod:`stimuli.physics.swing`; walks).
     """
     import mujoco
 
@@ -148,6 +150,12 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         # still brakes with −k_d q̄̇, so the feed-forward carries +k_d q̄̇ (with it, a floating
         # ragdoll at 1 % of the gains follows the reference to 0.1° over a second; without, 20°+).
         tau_ff = feedforward.sample(np.arange(n_steps) * dt) - model.actuator_biasprm[:, 2] * target["qd"]
+    swing = None
+    if swing_stance is not None:
+        from stimuli.physics.swing import UPDATE_STEPS, SwingController, swing_placement
+
+        swing = SwingController(model, swing_placement(model, ref, swing_stance, lift))
+        offset = np.zeros(model.nu)
     rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "root_target_quat", "pelvis_com")}
     forces = np.zeros((n_steps, model.nu))
     contact = np.zeros((n_steps, 2), bool)
@@ -158,6 +166,10 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         if i % k == 0 and i // k >= start_frame:
             _record(rec, data, target, i, dof_adr, pelvis)
         data.ctrl[:] = target["q"][i]
+        if swing is not None:
+            if i % UPDATE_STEPS == 0:
+                offset = swing.targets(data, i * dt, target["q"][i], target["root_pos"][i]) - target["q"][i]
+            data.ctrl[:] += offset
         if tau_ff is not None:
             model.actuator_biasprm[:, 0] = tau_ff[i]
         apply_root_wrench(data, gains, target, i, pelvis)

@@ -1,0 +1,180 @@
+"""World-space swing-foot placement: the contact-aware part of the walking controller.
+
+Joint-space PD tracking places a swinging foot relative to the *simulated* pelvis. When the pelvis
+runs low or pitched (a few millimetres of contact penetration, a degree of lean), the swing foot
+lands early, while the reference still swings it forward; the stiff leg then drags it along the
+floor or pushes the body up, the body trails its target, the root spring tows it forward, the tow
+pitches it further forward, and the next foot lands earlier still. On real captures this loop
+settled at a 6–10° lean, a 7–9 cm trail and 3–20 % of each walk with no foot on the floor (the
+reference: none); the generator's walks never entered it (docs/readme_physics.md).
+
+During the reference's swing (the shared contact model, :func:`stimuli.motion.contact.foot_contacts`)
+the swing leg's joint targets are therefore solved by inverse kinematics on the simulated body so
+that the foot follows the reference foot's *world* pose (the reference posed on the ragdoll,
+low-passed at :data:`CUTOFF_HZ`, never below the floor), and blended back to the joint reference
+over :data:`RAMP_S` after touchdown. Stance legs keep the joint reference, so the posture, the
+feed-forward and the mass effects the COM method measures are untouched in stance.
+
+It is used for walks only: on runs it raised flight above the reference's (CMU 35_17: 0.43 →
+0.59) and made the Bandai dash drift off its target (readme).
+
+Example
+-------
+>>> import numpy as np
+>>> w = swing_weights(np.array([[1, 0], [1, 0], [0, 1], [0, 1], [0, 1], [1, 1]], bool), fps=30.0, ramp_s=0.05)
+>>> w.round(2).tolist()
+[[0.33, 1.0], [0.0, 1.0], [1.0, 0.67], [1.0, 0.33], [1.0, 0.0], [0.67, 0.0]]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+# After touchdown the placement fades out over this long (s): long enough that the joint reference
+# takes over without a jolt, short enough that the stance leg carries the reference's posture.
+RAMP_S = 0.1
+# The reference foot path is low-passed at this frequency (Hz, periodic, zero-phase), as gait
+# kinematics are (Winter): a 30-fps capture's heel bounces 2–3 cm between frames at heel strike.
+CUTOFF_HZ = 6.0
+# Simulation steps between two solves (the targets are held in between): 250 Hz at 4 kHz.
+UPDATE_STEPS = 16
+IK_ITERATIONS = 8
+IK_DAMPING = 1e-4
+IK_TOLERANCE_M = 2e-4
+LEG_JOINTS = ("hip", "knee", "ankle")
+
+
+def swing_weights(stance: np.ndarray, fps: float, ramp_s: float = RAMP_S) -> np.ndarray:
+    """Frame × 2 weights of the placement: 1 in the reference's swing, fading linearly to 0 over
+    ``ramp_s`` after each touchdown, 0 in the rest of stance (the clip repeats)."""
+    stance = np.asarray(stance, bool)
+    n = len(stance)
+    out = (~stance).astype(float)
+    ramp = max(1, int(round(ramp_s * fps)))
+    for side in range(2):
+        down = stance[:, side]
+        for f in np.flatnonzero(down & ~np.roll(down, 1)):
+            for j in range(ramp):
+                k = (f + j) % n
+                if not down[k]:
+                    break
+                out[k, side] = max(out[k, side], 1.0 - (j + 1) / (ramp + 1))
+    return out
+
+
+@dataclasses.dataclass
+class SwingPlacement:
+    """Per reference frame: placement weights and the reference feet's world poses (treadmill frame)."""
+
+    fps: float
+    weights: np.ndarray       # frame × 2
+    foot_pos: np.ndarray      # frame × 2 × 3, without the belt's progression
+    foot_quat: np.ndarray     # frame × 2 × 4 (w, x, y, z)
+    root_z: np.ndarray        # frame: the root target's forward position without progression
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.weights)
+
+    def at(self, t: float, side: int) -> tuple[float, np.ndarray, np.ndarray, float]:
+        """(weight, foot position, foot quaternion, root forward offset) at time ``t`` (linear)."""
+        x = t * self.fps
+        f0 = int(np.floor(x))
+        a = x - f0
+        i0, i1 = f0 % self.n_frames, (f0 + 1) % self.n_frames
+        q0, q1 = self.foot_quat[i0, side], self.foot_quat[i1, side]
+        if q0 @ q1 < 0:
+            q1 = -q1
+        q = (1 - a) * q0 + a * q1
+        return ((1 - a) * self.weights[i0, side] + a * self.weights[i1, side],
+                (1 - a) * self.foot_pos[i0, side] + a * self.foot_pos[i1, side],
+                q / np.linalg.norm(q), (1 - a) * self.root_z[i0] + a * self.root_z[i1])
+
+
+def swing_placement(model, ref, stance: np.ndarray, lift: float) -> SwingPlacement:
+    """The placement of ``ref`` (a :class:`stimuli.physics.reference.Reference`) on ``model``, the
+    reference's feet ``lift`` metres up (the simulation's ground offset), never below the floor."""
+    import mujoco
+
+    from stimuli.physics.feedforward import periodic_lowpass
+
+    data = mujoco.MjData(model)
+    qadr = actuator_qpos(model)
+    bodies = [model.body(f"foot.{s}").id for s in "LR"]
+    geoms = [model.geom(f"foot.{s}").id for s in "LR"]
+    n = ref.n_frames
+    pos, rot = np.zeros((n, 2, 3)), np.zeros((n, 2, 4))
+    for f in range(n):
+        data.qpos[:3] = ref.root_pos[f] + [0.0, lift, 0.0]
+        data.qpos[3:7] = ref.root_quat[f]
+        data.qpos[qadr] = ref.q[f]
+        mujoco.mj_kinematics(model, data)
+        for side in range(2):
+            pos[f, side] = data.xpos[bodies[side]]
+            rot[f, side] = data.xquat[bodies[side]]
+            pos[f, side, 1] -= min(0.0, lowest_corner(model, data, geoms[side]))
+    pos = periodic_lowpass(pos.reshape(n, 6), ref.fps, CUTOFF_HZ).reshape(n, 2, 3)
+    return SwingPlacement(float(ref.fps), swing_weights(stance, ref.fps), pos, rot, ref.root_pos[:, 2].copy())
+
+
+def lowest_corner(model, data, geom: int) -> float:
+    """Height (m) of the lowest corner of a box geom in the posed ``data``."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * model.geom_size[geom]
+    return float((data.geom_xpos[geom][1] + corners @ data.geom_xmat[geom].reshape(3, 3)[1]).min())
+
+
+def actuator_qpos(model) -> np.ndarray:
+    """qpos address of each actuator's joint."""
+    return np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
+
+
+class SwingController:
+    """Solves the swing legs' joint targets on the simulated body (see the module docstring)."""
+
+    def __init__(self, model, placement: SwingPlacement):
+        import mujoco
+
+        self.model, self.placement = model, placement
+        self.scratch = mujoco.MjData(model)
+        self.qadr = actuator_qpos(model)
+        names = [model.actuator(a).name for a in range(model.nu)]
+        self.legs = [np.array([a for a, nm in enumerate(names) if nm.split(":")[0] in {f"{j}.{s}" for j in LEG_JOINTS}])
+                     for s in "LR"]
+        self.dofs = [np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in leg]) for leg in self.legs]
+        self.bodies = [model.body(f"foot.{s}").id for s in "LR"]
+        self.jacp, self.jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+
+    def targets(self, data, t: float, q_ref: np.ndarray, root_ref: np.ndarray) -> np.ndarray:
+        """Joint targets at time ``t``: ``q_ref`` with each swinging leg blended towards its IK solution."""
+        out = q_ref.copy()
+        for side in range(2):
+            w, pos, rot, root_z = self.placement.at(t, side)
+            if w <= 0.0:
+                continue
+            goal = pos.copy()
+            goal[2] += root_ref[2] - root_z          # the belt's progression since the clip's frame
+            solved = self._solve(data, q_ref, side, goal, rot)
+            out[self.legs[side]] = (1.0 - w) * q_ref[self.legs[side]] + w * solved
+        return out
+
+    def _solve(self, data, q_ref, side, goal, rot) -> np.ndarray:
+        import mujoco
+
+        m, d, leg, body = self.model, self.scratch, self.legs[side], self.bodies[side]
+        d.qpos[:] = data.qpos
+        d.qpos[self.qadr[leg]] = q_ref[leg]
+        err_rot = np.zeros(3)
+        for _ in range(IK_ITERATIONS):
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            err_pos = goal - d.xpos[body]
+            mujoco.mju_subQuat(err_rot, rot, d.xquat[body])
+            err = np.concatenate([err_pos, d.xmat[body].reshape(3, 3) @ err_rot])
+            mujoco.mj_jacBody(m, d, self.jacp, self.jacr, body)
+            jac = np.vstack([self.jacp, self.jacr])[:, self.dofs[side]]
+            d.qpos[self.qadr[leg]] += jac.T @ np.linalg.solve(jac @ jac.T + IK_DAMPING * np.eye(6), err)
+            if np.abs(err_pos).max() < IK_TOLERANCE_M:
+                break
+        return d.qpos[self.qadr[leg]].copy()
