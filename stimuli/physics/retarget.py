@@ -206,8 +206,9 @@ def on_reference_rig(motion, reference_body):
 
     Why: followed bone by bone, a capture's own rest frames posed the ragdoll's feet on their sides
     (the CC4 rig's feet rolled 69–71°, Bandai's pitched 43–53° toe down, CMU's rolled 20–21° at
-    mid-stance), stood its stance feet 1.5–2.5 cm above the floor and ran its belt 3–16 % faster
-    than its legs carry a planted foot. The retargeting lays the feet flat on the body's own soles.
+    mid-stance), stood its flat stance feet 0.5–2.5 cm above the floor and ran its belt 1–16 % faster
+    than its posed stance feet moved. The retargeting lays the feet flat on the body's own soles and
+    runs the belt at the speed the body's legs carry a planted foot.
     """
     if (list(motion.joint_names) == list(reference_body.rig.names) or motion.metadata.get("naming") == "canonical"
             or motion_gait(motion) != "walk"):
