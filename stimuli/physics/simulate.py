@@ -98,7 +98,6 @@ def ground_offset(model, ref, n: int = 60) -> float:
     data = mujoco.MjData(model)
     dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
     feet = [g for g in range(model.ngeom) if model.geom(g).name.startswith("foot")]
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
     target = ref.sample(np.linspace(0, ref.period, n, endpoint=False))
     lows = []
     for i in range(n):
@@ -106,10 +105,14 @@ def ground_offset(model, ref, n: int = 60) -> float:
         data.qpos[3:7] = target["root_quat"][i]
         data.qpos[dof_adr + 1] = target["q"][i]
         mujoco.mj_kinematics(model, data)
-        low = min((data.geom_xpos[g][:, None] + data.geom_xmat[g].reshape(3, 3) @ (corners * model.geom_size[g]).T)[1].min()
-                  for g in feet)
-        lows.append(low)
+        lows.append(min(lowest_corner(model, data, g) for g in feet))
     return -float(np.percentile(lows, 10))
+
+
+def lowest_corner(model, data, geom: int) -> float:
+    """Height (m) of the lowest corner of a box geom in the posed ``data``."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * model.geom_size[geom]
+    return float((data.geom_xpos[geom][1] + corners @ data.geom_xmat[geom].reshape(3, 3)[1]).min())
 
 
 def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = DEFAULT_RATE_HZ,

@@ -99,6 +99,7 @@ def swing_placement(model, ref, stance: np.ndarray, lift: float) -> SwingPlaceme
     import mujoco
 
     from stimuli.physics.feedforward import periodic_lowpass
+    from stimuli.physics.simulate import lowest_corner
 
     data = mujoco.MjData(model)
     qadr = actuator_qpos(model)
@@ -117,12 +118,6 @@ def swing_placement(model, ref, stance: np.ndarray, lift: float) -> SwingPlaceme
             pos[f, side, 1] -= min(0.0, lowest_corner(model, data, geoms[side]))
     pos = periodic_lowpass(pos.reshape(n, 6), ref.fps, CUTOFF_HZ).reshape(n, 2, 3)
     return SwingPlacement(float(ref.fps), swing_weights(stance, ref.fps), pos, rot, ref.root_pos[:, 2].copy())
-
-
-def lowest_corner(model, data, geom: int) -> float:
-    """Height (m) of the lowest corner of a box geom in the posed ``data``."""
-    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * model.geom_size[geom]
-    return float((data.geom_xpos[geom][1] + corners @ data.geom_xmat[geom].reshape(3, 3)[1]).min())
 
 
 def actuator_qpos(model) -> np.ndarray:
