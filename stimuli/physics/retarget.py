@@ -194,24 +194,31 @@ def _body_row(body, weight_kg: float) -> dict:
 
 
 def on_reference_rig(motion, reference_body):
-    """``(motion, retargeted_here)``: a motion on another skeleton than the Anny rig (a capture) is
-    retargeted onto ``reference_body``'s rig with the foot clean-up (:func:`stimuli.motion.retarget.retarget`)
-    before it becomes the ragdoll's reference. The project's own skeletons pass unchanged: Anny-rig
-    motions (retargeted, averages of captures), whichever Anny body they were made on (the paper's
-    one reference for every body), and the generator's canonical rig (generated gaits and their
-    averages, whose feet the generator lays out itself). Runs keep their own skeleton: the clean-up
-    moved the contact model's flight share of the Bandai runs' references by 18 and 15 points (the
-    dash 0.71 → 0.54, the tired jog 0.15 → 0.00), and their simulations flew 11–26 points more than
-    those references (CMU 35_17: 0.59 against 0.44; on its own skeleton 0.45).
+    """``(motion, retargeted_here)``: a walk that was not made on ``reference_body`` itself is
+    retargeted onto that body's rig with the foot clean-up (:func:`stimuli.motion.retarget.retarget`)
+    before it becomes the ragdoll's reference: a capture on its own skeleton, and an Anny-rig motion
+    made on another body or on none (an average of several actors' retargeted captures, metadata
+    ``source: average``, has no ``body_id``). Two kinds pass unchanged: a motion retargeted onto this
+    very body (metadata ``body_id``), and the generator's canonical rig (generated gaits and their
+    averages, whose feet the generator lays out on the body it is given). Runs keep their own
+    skeleton: the clean-up moved the contact model's flight share of the Bandai runs' references by
+    18 and 15 points (the dash 0.71 → 0.54, the tired jog 0.15 → 0.00), and their simulations flew
+    11–26 points more than those references (CMU 35_17: 0.59 against 0.44; on its own skeleton 0.45).
 
     Why: followed bone by bone, a capture's own rest frames posed the ragdoll's feet on their sides
     (the CC4 rig's feet rolled 69–71°, Bandai's pitched 43–53° toe down, CMU's rolled 20–21° at
     mid-stance), stood its flat stance feet 0.5–2.5 cm above the floor and ran its belt 1–16 % faster
-    than its posed stance feet moved. The retargeting lays the feet flat on the body's own soles and
-    runs the belt at the speed the body's legs carry a planted foot.
+    than its posed stance feet moved. The average of the men's real walks (Exp 2, on the mean man's
+    Anny rig) stood its stance feet 18-20 mm above the floor at the median: the body ran 29-32 mm
+    below its target and the swing placement bent the swing knees 8-10° past the reference to keep
+    the feet off the floor (tracking 3.4-4.1°; retargeted: 2.2-2.8°). Jog averages stay as they are:
+    the clean-up cut the women's jog average's flight share from 0.62 to 0.15. The retargeting lays
+    the feet flat on the body's own soles and runs the belt at the speed the body's legs carry a
+    planted foot.
     """
-    if (list(motion.joint_names) == list(reference_body.rig.names) or motion.metadata.get("naming") == "canonical"
-            or motion_gait(motion) != "walk"):
+    made_on_this_body = (list(motion.joint_names) == list(reference_body.rig.names)
+                         and motion.metadata.get("body_id") == reference_body.body_id)
+    if made_on_this_body or motion.metadata.get("naming") == "canonical" or motion_gait(motion) != "walk":
         return motion, False
     from stimuli.motion.retarget import retarget as onto_rig
 
