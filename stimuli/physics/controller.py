@@ -198,28 +198,32 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
 
 
 # Actuator torque limits (N·m), the same for every body (fat mass adds no muscle), per joint and
-# Euler axis (X: flexion/extension, Z: ab-/adduction or inversion/eversion, Y: axial rotation; the
-# larger direction of each pair). PROVENANCE NOT CHECKED: the values were rounded from memory of
-# two papers that are not in ../shared/seeds, and none was compared with their tables:
-# - Harbo, Brincks & Andersen (2012), Eur J Appl Physiol 112:267–275, doi:10.1007/s00421-011-1975-3:
-#   isometric and isokinetic (Biodex) peak torques at knee, ankle, hip, shoulder, elbow and wrist
-#   (18 test protocols per sex, 93 men and 85 women; per its abstract), published as sex-specific
-#   regressions of peak torque on age, height and body mass (body mass entered 27 of its 36 models),
-#   so it gives a limit per body, not one number; its isometric men's models are where the hip,
-#   knee, ankle, shoulder and elbow values should come from.
-# - Anderson, Madigan & Nussbaum (2007), J Biomech 40:3105–3113: maximum voluntary hip, knee and
-#   ankle flexion/extension torque as a function of joint angle and angular velocity, fitted per
-#   age and sex group; its peak isometric torque parameter is the check for those six values.
-# Neither paper covers the spine or neck: those values have no source at all; which of the other
-# axes (ab-/adduction, rotation, inversion/eversion) Harbo's protocols include was not checked.
+# Euler axis (X: flexion/extension, Z: ab-/adduction or inversion/eversion, Y: axial rotation). The
+# actuators are symmetric, so each carries the larger direction of its pair.
+#
+# Hip, knee and ankle flexion/extension (X): Anderson, Madigan & Nussbaum (2007), J Biomech
+# 40:3105–3113, Table 3, young men (18–25 years): the peak isometric torque c1 as a fraction of body
+# weight × height. Extension c1 hip 0.161, knee 0.163, ankle (plantar flexion) 0.095; flexion 0.113,
+# 0.087, 0.033 (young women: extension 0.181, 0.159, 0.104). Table 3 was read in RBDL's transcription
+# (addons/muscle/Millard2016TorqueMuscle.cc, Anderson2007Table3Mean), not in the paper, which is not
+# in ../shared/seeds. The limits are c1 × g × mass × height of one normal-weight man, the base
+# character (1.75 m, BMI 23: 70.4 kg): 195, 197 and 115 N·m.
+#
+# PROVENANCE NOT CHECKED for every other axis: spine, neck, shoulder, elbow, hip ab-/adduction and
+# rotation, ankle inversion/eversion and rotation were rounded from memory of Harbo, Brincks &
+# Andersen (2012), Eur J Appl Physiol 112:267–275 (isometric Biodex peak torques, sex-specific
+# regressions on age, height and body mass; only its abstract is reachable) and have no published
+# table behind them here; Anderson (2007) covers only the sagittal hip, knee and ankle.
+ANDERSON_2007_C1 = {"hip": 0.161, "knee": 0.163, "ankle": 0.095}
+NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * 23.0 * 1.75**2 * 1.75      # the base character's weight (N) × height (m)
 TORQUE_LIMITS_NM = {
     "spine": {"X": 250.0, "Z": 200.0, "Y": 100.0},
     "neck": {"X": 60.0, "Z": 50.0, "Y": 30.0},
     "shoulder": {"X": 100.0, "Z": 100.0, "Y": 60.0},
     "elbow": {"": 80.0},
-    "hip": {"X": 250.0, "Z": 150.0, "Y": 80.0},
-    "knee": {"": 250.0},
-    "ankle": {"X": 200.0, "Z": 60.0, "Y": 40.0},
+    "hip": {"X": float(round(ANDERSON_2007_C1["hip"] * NORM_BODY_WEIGHT_HEIGHT_NM)), "Z": 150.0, "Y": 80.0},
+    "knee": {"": float(round(ANDERSON_2007_C1["knee"] * NORM_BODY_WEIGHT_HEIGHT_NM))},
+    "ankle": {"X": float(round(ANDERSON_2007_C1["ankle"] * NORM_BODY_WEIGHT_HEIGHT_NM)), "Z": 60.0, "Y": 40.0},
 }
 
 
@@ -227,7 +231,7 @@ def torque_limit(dof: str) -> float:
     """Torque limit (N·m) of a ragdoll DoF name (``knee.L``, ``hip.R:X``).
 
     >>> torque_limit("knee.L"), torque_limit("hip.R:X"), torque_limit("ankle.L:Z")
-    (250.0, 250.0, 60.0)
+    (197.0, 195.0, 60.0)
     """
     joint, _, axis = dof.partition(":")
     return TORQUE_LIMITS_NM[joint.split(".")[0]][axis]
