@@ -167,16 +167,22 @@ def reference_stance(motion, n_frames: int) -> np.ndarray:
     return down
 
 
-def reference_feedforward(motion, reference_body, rate_hz: float | None = None) -> Feedforward:
-    """Feed-forward torques of ``motion`` performed by the ragdoll of ``reference_body``."""
+def reference_feedforward(motion, reference_body, rate_hz: float | None = None, toes: bool = False) -> Feedforward:
+    """Feed-forward torques of ``motion`` performed by the ragdoll of ``reference_body``; with
+    ``toes``, of the reference whose feet stand on the floor as a foot without toes can
+    (:func:`stimuli.physics.toes.stand_on_toes`), the one the controller then tracks."""
     from stimuli.physics.ragdoll import build_ragdoll, compile_model
     from stimuli.physics.reference import build_reference
 
     ref, ragdoll = build_reference(motion, reference_body, lambda axes: build_ragdoll(reference_body, None, axes))
+    stance = reference_stance(motion, ref.n_frames)
+    if toes:
+        from stimuli.physics.toes import stand_on_toes
+
+        ref, _ = stand_on_toes(ref, ragdoll, stance)
     ones = {d: 1.0 for d in ragdoll.dof_names}
     model = compile_model(ragdoll, 1e-3, ones, ones)
     times = np.arange(ref.n_frames) / ref.fps
-    stance = reference_stance(motion, ref.n_frames)
     feet = (model.body("foot.L").id, model.body("foot.R").id)
     sole = np.array([model.geom_pos[model.geom(f"foot.{s}").id] - [0, model.geom_size[model.geom(f"foot.{s}").id][1], 0]
                      for s in "LR"])

@@ -215,6 +215,7 @@ class Reference:
     rotations: dict[str, np.ndarray]
     bones: dict[str, int]
     align: dict[str, np.ndarray]
+    grounded: bool = False       # the floor is in root_pos already (stimuli.physics.toes)
 
     def __post_init__(self) -> None:
         n = self.q.shape[0]

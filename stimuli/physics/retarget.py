@@ -227,7 +227,8 @@ def on_reference_rig(motion, reference_body):
 
 def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
              min_simulated_s: float = 4.0, rate_hz: float = DEFAULT_RATE_HZ, raise_on_fall: bool = False,
-             feedforward: bool = False, torque_limits: bool = False, swing_placement: bool | None = None) -> RetargetResult:
+             feedforward: bool = False, torque_limits: bool = False, swing_placement: bool | None = None,
+             toes: bool | None = None) -> RetargetResult:
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
@@ -241,7 +242,9 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     human limits of :data:`stimuli.physics.controller.TORQUE_LIMITS_NM` (the same for every body).
     Both default off: the shipped controller is the paper's pure PD (readme: Controller variants).
     ``swing_placement`` (default: with the feed-forward, on walks): each swinging foot is placed in
-    the world as the reference places it (:mod:`stimuli.physics.swing`).
+    the world as the reference places it (:mod:`stimuli.physics.swing`). ``toes`` (default: with
+    the feed-forward, on runs): where the motion stands on its toes, the reference's toe-less foot
+    box stands on its ball (:mod:`stimuli.physics.toes`), for the PD and the feed-forward alike.
     An overground capture is looped first (:func:`loop_input`), and a capture is retargeted onto the
     reference body's rig (:func:`on_reference_rig`); ``result.motion`` is then the COM motion of that.
     """
@@ -252,27 +255,35 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
     if swing_placement is None:
         swing_placement = bool(feedforward) and motion_gait(motion) == "walk"
-    stance = None
-    if swing_placement:
+    toes = bool(feedforward) and motion_gait(motion) != "walk" if toes is None else bool(toes)
+    stance, toe_changes = None, None
+    if swing_placement or toes:
         from stimuli.physics.feedforward import reference_stance
 
         stance = reference_stance(motion, ref.n_frames)
+    if toes:
+        from stimuli.physics.toes import stand_on_toes
+
+        ref, toe_changes = stand_on_toes(ref, ragdoll, stance)
     if torque_limits:
         set_torque_limits(model)
     ff = None
     if feedforward:
         from stimuli.physics.feedforward import reference_feedforward
 
-        ff = reference_feedforward(motion, reference_body or body)
+        ff = reference_feedforward(motion, reference_body or body, toes=toes)
     warmup_loops = max(1, int(np.ceil(min_simulated_s / ref.period - 1.0 - 1e-9)))
-    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz, feedforward=ff, swing_stance=stance)
+    sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz, feedforward=ff,
+                   swing_stance=stance if swing_placement else None)
     out, nocom = None, None
     if not sim.fell:
         out = to_motion(motion, body, sim, ref, ragdoll)
         nocom = joint_rms_difference(motion, out, ref, ragdoll)
     report = build_report(sim, ragdoll, body, reference_body or body, weight, gains, nocom)
     report["controller"] = {"feedforward": bool(feedforward), "torque_limits": bool(torque_limits),
-                            "swing_placement": bool(swing_placement)}
+                            "swing_placement": bool(swing_placement), "toes": toes}
+    if toe_changes is not None:
+        report["reference_on_toes"] = toe_changes
     report["reference_flight_fraction"] = reference_flight_fraction(motion)
     report["looped_input"] = looped_here
     report["retargeted_onto_reference_rig"] = onto_rig_here

@@ -91,9 +91,14 @@ def ground_offset(model, ref, n: int = 60) -> float:
     """Vertical shift (m) that puts the lowest foot points over the clip on the floor.
 
     Poses the model kinematically at ``n`` instants of the reference and takes, per instant, the
-    lowest corner of the two foot boxes; the 10th percentile of those minima goes to y = 0.
+    lowest corner of the two foot boxes; the 10th percentile of those minima goes to y = 0. A
+    reference that carries the floor in its root already (``ref.grounded``, :mod:`stimuli.physics.toes`)
+    needs no shift.
     """
     import mujoco
+
+    if getattr(ref, "grounded", False):
+        return 0.0
 
     data = mujoco.MjData(model)
     dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
@@ -111,8 +116,12 @@ def ground_offset(model, ref, n: int = 60) -> float:
 
 def lowest_corner(model, data, geom: int) -> float:
     """Height (m) of the lowest corner of a box geom in the posed ``data``."""
-    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * model.geom_size[geom]
-    return float((data.geom_xpos[geom][1] + corners @ data.geom_xmat[geom].reshape(3, 3)[1]).min())
+    return float((data.geom_xpos[geom][1] + box_corners(model, geom) @ data.geom_xmat[geom].reshape(3, 3)[1]).min())
+
+
+def box_corners(model, geom: int) -> np.ndarray:
+    """The 8 corners (8 × 3, m) of a box geom in its own frame."""
+    return np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * model.geom_size[geom]
 
 
 def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = DEFAULT_RATE_HZ,

@@ -134,12 +134,8 @@ class SwingController:
         self.model, self.placement = model, placement
         self.scratch = mujoco.MjData(model)
         self.qadr = actuator_qpos(model)
-        names = [model.actuator(a).name for a in range(model.nu)]
-        self.legs = [np.array([a for a, nm in enumerate(names) if nm.split(":")[0] in {f"{j}.{s}" for j in LEG_JOINTS}])
-                     for s in "LR"]
-        self.dofs = [np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in leg]) for leg in self.legs]
+        self.legs, self.dofs = leg_dofs(model)
         self.bodies = [model.body(f"foot.{s}").id for s in "LR"]
-        self.jacp, self.jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
     def targets(self, data, t: float, q_ref: np.ndarray, root_ref: np.ndarray) -> np.ndarray:
         """Joint targets at time ``t``: ``q_ref`` with each swinging leg blended towards its IK solution."""
@@ -155,21 +151,38 @@ class SwingController:
         return out
 
     def _solve(self, data, q_ref, side, goal, rot) -> np.ndarray:
-        import mujoco
-
-        m, d, leg, body = self.model, self.scratch, self.legs[side], self.bodies[side]
+        d, leg = self.scratch, self.legs[side]
         d.qpos[:] = data.qpos
         d.qpos[self.qadr[leg]] = q_ref[leg]
-        err_rot = np.zeros(3)
-        for _ in range(IK_ITERATIONS):
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            err_pos = goal - d.xpos[body]
-            mujoco.mju_subQuat(err_rot, rot, d.xquat[body])
-            err = np.concatenate([err_pos, d.xmat[body].reshape(3, 3) @ err_rot])
-            mujoco.mj_jacBody(m, d, self.jacp, self.jacr, body)
-            jac = np.vstack([self.jacp, self.jacr])[:, self.dofs[side]]
-            d.qpos[self.qadr[leg]] += jac.T @ np.linalg.solve(jac @ jac.T + IK_DAMPING * np.eye(6), err)
-            if np.abs(err_pos).max() < IK_TOLERANCE_M:
-                break
+        solve_leg(self.model, d, self.qadr[leg], self.dofs[side], self.bodies[side], goal, rot)
         return d.qpos[self.qadr[leg]].copy()
+
+
+def leg_dofs(model) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per side (L, R): the actuator indices of the leg's joints (:data:`LEG_JOINTS`) and their dof addresses."""
+    names = [model.actuator(a).name for a in range(model.nu)]
+    legs = [np.array([a for a, nm in enumerate(names) if nm.split(":")[0] in {f"{j}.{s}" for j in LEG_JOINTS}])
+            for s in "LR"]
+    return legs, [np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in leg]) for leg in legs]
+
+
+def solve_leg(model, data, qadr, dofs, body: int, goal: np.ndarray, rot: np.ndarray,
+              iterations: int = IK_ITERATIONS, tolerance_m: float = IK_TOLERANCE_M) -> float:
+    """Damped least-squares IK in place on ``data.qpos[qadr]`` (one leg) so that ``body`` reaches
+    the world position ``goal`` and orientation ``rot`` (w, x, y, z); returns the last position error (m)."""
+    import mujoco
+
+    jacp, jacr, err_rot = np.zeros((3, model.nv)), np.zeros((3, model.nv)), np.zeros(3)
+    err_pos = np.zeros(3)
+    for _ in range(iterations):
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        err_pos = goal - data.xpos[body]
+        mujoco.mju_subQuat(err_rot, rot, data.xquat[body])
+        err = np.concatenate([err_pos, data.xmat[body].reshape(3, 3) @ err_rot])
+        mujoco.mj_jacBody(model, data, jacp, jacr, body)
+        jac = np.vstack([jacp, jacr])[:, dofs]
+        data.qpos[qadr] += jac.T @ np.linalg.solve(jac @ jac.T + IK_DAMPING * np.eye(6), err)
+        if np.abs(err_pos).max() < tolerance_m:
+            break
+    return float(np.abs(err_pos).max())
