@@ -496,12 +496,12 @@ def test_the_reference_stands_on_the_ball_of_its_box_where_the_motion_stands_on_
     from stimuli.physics.simulate import ground_offset
     from stimuli.physics.toes import late_stance, stand_on_toes
 
-    ref, ragdoll, model, _ = prepare(jog, fit_body("M", 1.75, 23.0))
+    ref, _, model, _ = prepare(jog, fit_body("M", 1.75, 23.0))
     stance = reference_stance(jog, ref.n_frames)
     late = np.stack([late_stance(stance[:, 0]), late_stance(stance[:, 1])], axis=1)
     before = _box_lows(model, ref)
     assert before[late].max() > 0.010
-    on_toes, changed = stand_on_toes(ref, ragdoll, stance)
+    on_toes, changed = stand_on_toes(ref, model, stance)
     after = _box_lows(model, on_toes)
     assert on_toes.grounded and ground_offset(model, on_toes) == 0.0
     assert np.abs(after[late]).max() < 0.001

@@ -175,13 +175,13 @@ def reference_feedforward(motion, reference_body, rate_hz: float | None = None, 
     from stimuli.physics.reference import build_reference
 
     ref, ragdoll = build_reference(motion, reference_body, lambda axes: build_ragdoll(reference_body, None, axes))
+    ones = {d: 1.0 for d in ragdoll.dof_names}
+    model = compile_model(ragdoll, 1e-3, ones, ones)
     stance = reference_stance(motion, ref.n_frames)
     if toes:
         from stimuli.physics.toes import stand_on_toes
 
-        ref, _ = stand_on_toes(ref, ragdoll, stance)
-    ones = {d: 1.0 for d in ragdoll.dof_names}
-    model = compile_model(ragdoll, 1e-3, ones, ones)
+        ref, _ = stand_on_toes(ref, model, stance)
     times = np.arange(ref.n_frames) / ref.fps
     feet = (model.body("foot.L").id, model.body("foot.R").id)
     sole = np.array([model.geom_pos[model.geom(f"foot.{s}").id] - [0, model.geom_size[model.geom(f"foot.{s}").id][1], 0]

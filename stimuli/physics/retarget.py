@@ -264,7 +264,7 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     if toes:
         from stimuli.physics.toes import stand_on_toes
 
-        ref, toe_changes = stand_on_toes(ref, ragdoll, stance)
+        ref, toe_changes = stand_on_toes(ref, model, stance)
     if torque_limits:
         set_torque_limits(model)
     ff = None

@@ -27,6 +27,9 @@ reference's feet as they are (readme: Controller variants).
 Example
 -------
 >>> import numpy as np
+from scipy.spatial.transform import Rotation
+
+from stimuli.motion import quat
 >>> late_stance(np.array([1, 1, 1, 1, 0, 0, 1, 1], bool)).astype(int).tolist()   # one contact, across the seam
 [0, 1, 1, 1, 0, 0, 0, 0]
 """
@@ -36,6 +39,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.spatial.transform import Rotation
+
+from stimuli.motion import quat
 
 # The largest plantar flexion added (a foot on its toes pitches 11–21° at push-off in the jogs).
 MAX_PITCH_DEG = 40.0
@@ -61,19 +67,17 @@ def late_stance(down: np.ndarray) -> np.ndarray:
     return out
 
 
-def stand_on_toes(ref, ragdoll, stance: np.ndarray):
-    """``ref`` (a :class:`stimuli.physics.reference.Reference`) with the floor in its root and its
+def stand_on_toes(ref, model, stance: np.ndarray):
+    """``ref`` (a :class:`stimuli.physics.reference.Reference`, posed on the compiled ragdoll ``model``)
+    with the floor in its root and its
     feet on the floor where ``stance`` (frame × 2, the motion's contact model) has them down, and
     the frames changed (a dict: share of frames whose ankles were pitched, largest pitch in degrees,
     largest raise in mm)."""
     import mujoco
 
-    from stimuli.physics.ragdoll import compile_model
     from stimuli.physics.simulate import ground_offset
     from stimuli.physics.swing import actuator_qpos, leg_dofs
 
-    ones = {d: 1.0 for d in ragdoll.dof_names}
-    model = compile_model(ragdoll, 1e-3, ones, ones)
     root = ref.root_pos + [0.0, ground_offset(model, ref), 0.0]
     data, qadr = mujoco.MjData(model), actuator_qpos(model)
     legs, dofs = leg_dofs(model)
@@ -179,11 +183,9 @@ def _clear_the_floor(model, data, pose, q, qadr, legs, dofs, feet) -> float:
 
 def _about_lateral(data, body: int, angle: float) -> np.ndarray:
     """Quaternion (w, x, y, z) of a turn by ``angle`` about the foot body's lateral (x) axis, in the world."""
-    axis = data.xmat[body].reshape(3, 3)[:, 0]
-    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
+    return quat.from_axis_angle(data.xmat[body].reshape(3, 3)[:, 0] * angle)
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix of ``angle`` about the unit ``axis`` (Rodrigues)."""
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    """Rotation matrix of ``angle`` about the unit ``axis``."""
+    return Rotation.from_rotvec(axis * angle).as_matrix()
