@@ -27,9 +27,6 @@ reference's feet as they are (readme: Controller variants).
 Example
 -------
 >>> import numpy as np
-from scipy.spatial.transform import Rotation
-
-from stimuli.motion import quat
 >>> late_stance(np.array([1, 1, 1, 1, 0, 0, 1, 1], bool)).astype(int).tolist()   # one contact, across the seam
 [0, 1, 1, 1, 0, 0, 0, 0]
 """
