@@ -16,6 +16,10 @@ Both are applied where the renderer receives a figure's pose
 (``stimuli.render.clip.render_frames``), so every path — generated, retargeted, averaged,
 physics — gets them once.
 
+Two helpers serve the retargeting (``stimuli.motion.retarget``) instead: :func:`clavicle_world`
+(the clavicles' motion without the source rig's build) and :func:`elbow_hinge_twist` (the arms'
+twist from the plane the capture's elbow bends in, not from the source rig's bone frames).
+
 Examples
 --------
 >>> from stimuli.bodies.api import fit_body
@@ -372,6 +376,63 @@ def clavicle_world(source_grot: np.ndarray, roles: dict[str, int], chest_world: 
         about_mean = quat.mul(relative, quat.inv(quat.mean(relative))[None])
         out[side] = quat.mul(chest_world, about_mean)
     return out
+
+
+# Elbows bent less than this (degrees) leave their bend plane to noise: they do not vote on the twist.
+HINGE_MIN_FLEX_DEG = 10.0
+
+
+def elbow_hinge_twist(upper: np.ndarray, fore: np.ndarray, upper_rest: np.ndarray, fore_rest: np.ndarray,
+                      upper_dir: np.ndarray, fore_dir: np.ndarray, forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Upper-arm and forearm world rotations (T×4 each) turned about their own bones by the one
+    fixed twist each that makes the target's elbow flex in the plane the source's arm bends in.
+
+    ``upper``/``fore``: retargeted world rotations (rest-relative, world axes) that already point the
+    bones along the source's segments ``upper_dir``/``fore_dir`` (T×3); ``upper_rest``/``fore_rest``:
+    the target's rest bone directions; ``forward``: the target's rest forward axis. The target's
+    elbow hinge is the rest axis about which the forearm swings forward, cross(upper_rest,
+    forward); the source's, per frame, the normal of its shoulder–elbow–wrist plane. The twist is
+    their mean angle about the bone over the frames bent at least :data:`HINGE_MIN_FLEX_DEG`
+    (weighted by how bent); an arm that never bends that much keeps its twist.
+
+    Why: retargeting copies a bone's twist from the source rig, and rigs disagree about it: Bandai's
+    right arm came out twisted 179° against its left, CMU's 29° and CC4's forearms 62° against
+    the generator's. The positions were right, but the local elbow rotations of one capture were a
+    half turn from another's, so the average of the men's runs (two CMU, two Bandai) swung its right
+    forearm from 25° to 176° of flexion where every capture keeps 48-132°.
+
+    >>> t = np.linspace(0.0, 1.0, 5)
+    >>> flex = np.radians(30 + 40 * t)                       # a bending arm hanging down, forearm forward
+    >>> down, fwd = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    >>> fore_dir = np.stack([0 * t, -np.cos(flex), np.sin(flex)], 1)
+    >>> twisted = quat.from_axis_angle(np.array([0.0, np.pi, 0.0]))          # a half turn about the bone
+    >>> upper = np.tile(twisted, (5, 1))
+    >>> fore = quat.mul(upper, quat.from_axis_angle(flex[:, None] * np.array([1.0, 0, 0])))  # so bent about +x
+    >>> u, f = elbow_hinge_twist(upper, fore, down, down, np.tile(down, (5, 1)), fore_dir, fwd)
+    >>> bool(np.allclose(quat.rotate(f, down), fore_dir))                   # the bones still point as before
+    True
+    >>> local = quat.mul(quat.inv(u), f)                   # now a flexion about the hinge, cross(down, fwd) = -x
+    >>> (np.round(np.degrees(quat.to_axis_angle(local)), 1) + 0.0)[[0, -1]].tolist()
+    [[-30.0, 0.0, 0.0], [-70.0, 0.0, 0.0]]
+    """
+    bend = np.cross(upper_dir, fore_dir)
+    sin_flex = np.linalg.norm(bend, axis=1) / (np.linalg.norm(upper_dir, axis=1) * np.linalg.norm(fore_dir, axis=1))
+    weight = np.where(sin_flex >= np.sin(np.radians(HINGE_MIN_FLEX_DEG)), sin_flex, 0.0)
+    bend = bend / np.maximum(np.linalg.norm(bend, axis=1, keepdims=True), 1e-12)
+    hinge = _unit(np.cross(upper_rest, forward))
+    out = []
+    for world, rest in ((upper, upper_rest), (fore, fore_rest)):
+        axis = _unit(rest)
+        if not weight.any():
+            out.append(world)
+            continue
+        h = _unit(hinge - axis * (hinge @ axis))
+        seen = quat.rotate(quat.inv(world), bend)          # the source's bend normal in rest axes
+        seen = seen - np.outer(seen @ axis, axis)
+        angle = np.arctan2(np.cross(h, seen) @ axis, seen @ h)
+        twist = np.arctan2((weight * np.sin(angle)).sum(), (weight * np.cos(angle)).sum())
+        out.append(quat.mul(world, quat.from_axis_angle(twist * axis)[None]))
+    return out[0], out[1]
 
 
 def natural_pose(body, rotations, root_translation) -> np.ndarray:

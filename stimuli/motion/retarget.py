@@ -10,7 +10,9 @@ Method (rest-pose alignment, then clean-up):
    Anny's five spine bones by slerp between pelvis and chest, the neck over its three. Pelvis,
    chest, head and the legs' roll take a rest turn snapped to the 24 axis-to-axis turns
    (:func:`rest_turn`: a rig whose rest frames lie along other axes, Bandai's); a foot standing flat
-   on the source's floor stands flat on Anny's (:func:`flat_foot_turn`).
+   on the source's floor stands flat on Anny's (:func:`flat_foot_turn`). The upper arm and forearm
+   turn about their bones so that Anny's elbow flexes in the capture's bend plane
+   (:func:`stimuli.motion.arms.elbow_hinge_twist`: rigs disagree about the arms' twist).
 2. The pelvis path is scaled by the leg-length ratio (thigh + shank + ankle height, from the
    segment lengths, whatever the rest pose): root height and stride follow the target's legs, so
    the belt speed scales too (recorded).
@@ -32,7 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.motion import quat
-from stimuli.motion.arms import clavicle_world
+from stimuli.motion.arms import clavicle_world, elbow_hinge_twist
 from stimuli.motion.events import stance_from_events
 from stimuli.motion.balance import balance
 from stimuli.motion.contact import contact_mask, foot_contacts
@@ -258,6 +260,15 @@ def _world_rotations(source: Motion, rig) -> tuple[np.ndarray, dict]:
                 continue
         have = quat.rotate(g, r_t)
         world[rig.index(bone)] = quat.mul(quat.between(have, want), g)
+    forward = rest_trunk[:, 2] * [1.0, 0.0, 1.0]      # level: the rest trunk's lean is no part of the elbow's axis
+    for s in ("l", "r"):
+        S = s.upper()
+        upper, fore = rig.index(f"upperarm01.{S}"), rig.index(f"lowerarm01.{S}")
+        if upper in world and fore in world:
+            world[upper], world[fore] = elbow_hinge_twist(
+                world[upper], world[fore], tgt_rest[fore] - tgt_rest[upper], tgt_rest[rig.index(f"wrist.{S}")] - tgt_rest[fore],
+                gpos[:, roles[f"{s}_elbow"]] - gpos[:, roles[f"{s}_shoulder"]],
+                gpos[:, roles[f"{s}_wrist"]] - gpos[:, roles[f"{s}_elbow"]], forward)
     return world, roles
 
 
