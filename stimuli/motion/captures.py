@@ -187,15 +187,22 @@ def average_inputs(protocol, actors: list, gait: str, fps: float, cycles: int) -
     motions = [actor_motion(protocol, a, gait, fps, cycles) for a in actors]
     if not any(gait in a.motions for a in actors):
         return motions
+    from stimuli.motion.retarget import retarget
+
+    body = average_body(actors)
+    return [retarget(m, body) for m in motions]
+
+
+def average_body(actors: list):
+    """The body of the actors' mean height and BMI (of the first sex among them): the body an
+    average of their captures is made on (:func:`average_inputs`)."""
     import numpy as np
 
     from stimuli.bodies import body_for_actor
-    from stimuli.motion.retarget import retarget
     from stimuli.protocol import Actor
 
     sexes = sorted({a.sex for a in actors})
     mean = Actor(id=f"average_{'_'.join(sexes)}", label="average", sex=sexes[0],
                  height_m=round(float(np.mean([a.height_m for a in actors])), 3),
                  bmi=round(float(np.mean([a.bmi for a in actors])), 2))
-    body = body_for_actor(mean)
-    return [retarget(m, body) for m in motions]
+    return body_for_actor(mean)
