@@ -91,7 +91,7 @@ def compare_controllers(out: str, protocol: str = "protocols/exp2_com_vs_average
 
     from stimuli.physics.protocol_step import run_protocol
 
-    print("controller actor gait ref_flight sim_flight tracking_deg b_mm weight_gap_kg gain_scale knee_swing_peak "
+    print("controller actor gait ref_flight sim_flight sim_flight_contact_model tracking_deg b_mm weight_gap_kg gain_scale knee_swing_peak "
           "knee_stance_peak over_limit(dof:peak/limit) fell wall_s cpu_s")
     for name, ff in (("pd", False), ("pd_ff", True)):
         start, cpu = time.perf_counter(), _cpu_s(resource)
@@ -107,6 +107,7 @@ def compare_controllers(out: str, protocol: str = "protocols/exp2_com_vs_average
                     if v["peak"] > v["limit"]]
             gap = r["body"]["weight_kg"] - r["reference_body"]["weight_kg"]
             print(f"{name} {r['actor']} {r['gait']} {r.get('reference_flight_fraction')} {r['flight_fraction']} "
+                  f"{r.get('flight_fraction_contact_model')} "
                   f"{r['tracking_rms_deg_overall']} {1000 * r['b_m']:.2f} {gap:+.1f} {r.get('gain_choice', {}).get('scale', 1)} "
                   f"{r.get('knee_flexion_peak_deg')} {r.get('knee_flexion_stance_peak_deg')} {','.join(over) or '-'} "
                   f"{r['fell']} {wall:.0f} {cpu:.0f}")
