@@ -234,7 +234,9 @@ def test_one_video_renders_six_separate_mesh_walkers(tmp_path):
     assert frames.shape == (10, 90, 320, 3)
     for frame in frames:
         grey = frame.astype(int).max(axis=-1)
-        assert (np.median(grey, axis=1) < 20).all()              # display.floor: false: black throughout
+        # display.floor: false: black throughout. A floor fills whole rows from the horizon down; six
+        # heavy walkers with their arms out fill up to half of a row at chest height (0.43-0.48).
+        assert (np.percentile(grey, 30, axis=1) < 20).all()
         lit = grey > 40
         parts, n = ndimage.label(lit)
         boxes = ndimage.find_objects(parts)
