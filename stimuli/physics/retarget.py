@@ -164,7 +164,7 @@ def reference_flight_fraction(motion) -> float:
     Why not at the clip's own rate: at 30 fps one frame is 3.8 % of a 26-frame jog cycle, and the
     contact model places touchdown up to a frame late where the foot's speed is a difference across
     the landing. The Exp-2 DTW jog averages read 0.192 (men) and 0.231 (women) at 30 fps, 0.202 and
-    0.206 sampled at 240; the simulation's flight share is counted per physics step, so the 5-point
+    0.207 sampled at 240; the simulation's flight share is counted per physics step, so the 5-point
     bound on jogs was judged against a figure with up to two frames' (7.7 points') rounding in it.
     Sampling finer cannot restore what 30-fps frames lost: the generated jog made at 30, 60, 120
     and 240 fps reads 0.283, 0.242, 0.219 and 0.214 here (0.311, 0.244, 0.228, 0.214 at its own
