@@ -187,7 +187,7 @@ def retime(motion: Motion, factor: float) -> Motion:
     n = max(int(round(span * motion.fps)), 2)
     # Sample the periodic clip: times wrap so the loop stays closed.
     src_t = (np.arange(n) / motion.fps * factor)
-    rot, root = _sample_periodic(motion, src_t) if motion.metadata.get("looped") else motion.sample(src_t)
+    rot, root = sample_periodic(motion, src_t) if motion.metadata.get("looped") else motion.sample(src_t)
     out = motion.replace(rotations=rot, root_translation=root)
     for key in ("cadence_spm", "speed_mps", "belt_speed_mps"):
         if key in motion.metadata:
@@ -195,7 +195,7 @@ def retime(motion: Motion, factor: float) -> Motion:
     return out
 
 
-def _sample_periodic(motion: Motion, times: np.ndarray):
+def sample_periodic(motion: Motion, times: np.ndarray):
     """Sample a looped clip at times in [0, duration): the last frame blends into the first."""
     f = np.asarray(times) * motion.fps % motion.n_frames
     i0 = np.floor(f).astype(int) % motion.n_frames

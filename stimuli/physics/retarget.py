@@ -199,9 +199,9 @@ def finely_sampled(motion, fps: float):
     meta = motion.metadata
     if not (meta.get("looped") and meta.get("treadmill")):
         return motion.resample(float(motion.fps * k))
-    closed = motion.replace(rotations=np.concatenate([motion.rotations, motion.rotations[:1]]),
-                            root_translation=np.concatenate([motion.root_translation, motion.root_translation[:1]]))
-    rot, root = closed.sample(np.arange(motion.n_frames * k) / (motion.fps * k))
+    from stimuli.motion.loop import sample_periodic
+
+    rot, root = sample_periodic(motion, np.arange(motion.n_frames * k) / (motion.fps * k))
     return motion.replace(fps=float(motion.fps * k), rotations=rot, root_translation=root)
 
 
