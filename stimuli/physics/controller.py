@@ -199,42 +199,70 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
 
 # Actuator torque limits (N·m), the same for every body (fat mass adds no muscle), per joint and
 # Euler axis (X: flexion/extension, Z: ab-/adduction or inversion/eversion, Y: axial rotation). The
-# actuators are symmetric, so each carries the larger direction of its pair.
+# actuators are symmetric, so each carries the larger direction of its pair where the source gives both.
+# Every sourced limit is scaled to one normal-weight man, the base character (1.75 m, BMI 23: 70.4 kg).
 #
 # Hip, knee and ankle flexion/extension (X): Anderson, Madigan & Nussbaum (2007), J Biomech
 # 40:3105–3113, Table 3, young men (18–25 years): the peak isometric torque c1 as a fraction of body
 # weight × height. Extension c1 hip 0.161, knee 0.163, ankle (plantar flexion) 0.095; flexion 0.113,
 # 0.087, 0.033 (young women: extension 0.181, 0.159, 0.104). Table 3 was read in RBDL's transcription
 # (addons/muscle/Millard2016TorqueMuscle.cc, Anderson2007Table3Mean), not in the paper, which is not
-# in ../shared/seeds. The limits are c1 × g × mass × height of one normal-weight man, the base
-# character (1.75 m, BMI 23: 70.4 kg): 195, 197 and 115 N·m.
+# in ../shared/seeds: 195, 197 and 115 N·m.
+# Hip ab-/adduction (Z): Sugimoto, Mattacola, Mullineaux, Palmer & Hewett (2014), Clin J Sport Med
+# 24:422–428, abstract: peak hip abduction torque of 16 male collegiate athletes 1.29 ± 0.24 N·m/kg
+# (concentric, 60°/s, standing; adduction is not given there): 91 N·m.
+# Ankle inversion/eversion (Z): da Fonseca et al. (2025), World J Orthop 16(10):108858, abstract and
+# Table 1: mean peak torque of 200 ankles (69 men, 31 women; Biodex 3, isokinetic) inversion 34.8,
+# eversion 29.9 N·m: 35 N·m (not scaled: the paper gives no per-kg figure).
+# Elbow flexion/extension: Lategan & Krüger (2003), Afr J Phys Health Educ Recreat Dance, special
+# edition 165–172, abstract: 199 young men, concentric isokinetic (Cybex 340), flexion 78 % and
+# extension 67 % of body mass (N·m per kg × 100): 55 N·m.
+# These are concentric (isokinetic) peaks, below an isometric maximum; every sourced figure was read in
+# a reachable abstract or table, none of the papers is in ../shared/seeds.
 #
-# PROVENANCE NOT CHECKED for every other axis: spine, neck, shoulder, elbow, hip ab-/adduction and
-# rotation, ankle inversion/eversion and rotation were rounded from memory of Harbo, Brincks &
-# Andersen (2012), Eur J Appl Physiol 112:267–275 (isometric Biodex peak torques, sex-specific
-# regressions on age, height and body mass; only its abstract is reachable) and have no published
-# table behind them here; Anderson (2007) covers only the sagittal hip, knee and ankle.
+# PROVENANCE NOT CHECKED for every other axis: spine, neck, shoulder, hip rotation and ankle rotation
+# were rounded from memory of Harbo, Brincks & Andersen (2012), Eur J Appl Physiol 112:267–275
+# (isometric Biodex peak torques, sex-specific regressions on age, height and body mass; only its
+# abstract is reachable) and have no published figure behind them here.
+NORM_BODY_MASS_KG = 23.0 * 1.75**2                            # the base character
+NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * NORM_BODY_MASS_KG * 1.75  # its weight (N) × height (m)
 ANDERSON_2007_C1 = {"hip": 0.161, "knee": 0.163, "ankle": 0.095}
-NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * 23.0 * 1.75**2 * 1.75      # the base character's weight (N) × height (m)
+SUGIMOTO_2014_HIP_ABDUCTION_NM_PER_KG = 1.29
+DA_FONSECA_2025_ANKLE_INVERSION_NM = 34.8
+LATEGAN_2003_ELBOW_FLEXION_NM_PER_KG = 0.78
 TORQUE_LIMITS_NM = {
     "spine": {"X": 250.0, "Z": 200.0, "Y": 100.0},
     "neck": {"X": 60.0, "Z": 50.0, "Y": 30.0},
     "shoulder": {"X": 100.0, "Z": 100.0, "Y": 60.0},
-    "elbow": {"": 80.0},
-    "hip": {"X": float(round(ANDERSON_2007_C1["hip"] * NORM_BODY_WEIGHT_HEIGHT_NM)), "Z": 150.0, "Y": 80.0},
+    "elbow": {"": float(round(LATEGAN_2003_ELBOW_FLEXION_NM_PER_KG * NORM_BODY_MASS_KG))},
+    "hip": {"X": float(round(ANDERSON_2007_C1["hip"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
+            "Z": float(round(SUGIMOTO_2014_HIP_ABDUCTION_NM_PER_KG * NORM_BODY_MASS_KG)), "Y": 80.0},
     "knee": {"": float(round(ANDERSON_2007_C1["knee"] * NORM_BODY_WEIGHT_HEIGHT_NM))},
-    "ankle": {"X": float(round(ANDERSON_2007_C1["ankle"] * NORM_BODY_WEIGHT_HEIGHT_NM)), "Z": 60.0, "Y": 40.0},
+    "ankle": {"X": float(round(ANDERSON_2007_C1["ankle"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
+              "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)), "Y": 40.0},
 }
+# The axes whose limit has a published figure behind it (above); the report says which these are.
+SOURCED_LIMITS = {("hip", "X"), ("hip", "Z"), ("knee", ""), ("ankle", "X"), ("ankle", "Z"), ("elbow", "")}
 
 
 def torque_limit(dof: str) -> float:
     """Torque limit (N·m) of a ragdoll DoF name (``knee.L``, ``hip.R:X``).
 
-    >>> torque_limit("knee.L"), torque_limit("hip.R:X"), torque_limit("ankle.L:Z")
-    (197.0, 195.0, 60.0)
+    >>> torque_limit("knee.L"), torque_limit("hip.R:X"), torque_limit("hip.R:Z"), torque_limit("ankle.L:Z")
+    (197.0, 195.0, 91.0, 35.0)
     """
     joint, _, axis = dof.partition(":")
     return TORQUE_LIMITS_NM[joint.split(".")[0]][axis]
+
+
+def torque_limit_sourced(dof: str) -> bool:
+    """Whether the limit of a ragdoll DoF has a published figure behind it (:data:`SOURCED_LIMITS`).
+
+    >>> torque_limit_sourced("knee.L"), torque_limit_sourced("ankle.R:Z"), torque_limit_sourced("spine:X")
+    (True, True, False)
+    """
+    joint, _, axis = dof.partition(":")
+    return (joint.split(".")[0], axis) in SOURCED_LIMITS
 
 
 def set_torque_limits(model, limits: dict[str, float] | None = None) -> np.ndarray:

@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.physics import inertia
-from stimuli.physics.controller import Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit
+from stimuli.physics.controller import Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit, torque_limit_sourced
 from stimuli.physics.output import joint_rms_difference, to_motion
 from stimuli.physics.ragdoll import build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
@@ -141,7 +141,8 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
 
 
 def torque_peaks(sim) -> dict[str, dict[str, float]]:
-    """Per DoF: peak |actuator torque| (N·m) over the recorded pass and the human limit it is held to.
+    """Per DoF: peak |actuator torque| (N·m) over the recorded pass, the human limit it is held to,
+    and whether that limit has a published figure behind it (``sourced``).
 
     The limit (:data:`stimuli.physics.controller.TORQUE_LIMITS_NM`) is reported whether or not the
     simulation enforced it, so a pure-PD run shows where it asks for more than a strong adult has.
@@ -149,7 +150,8 @@ def torque_peaks(sim) -> dict[str, dict[str, float]]:
     if not len(sim.actuator_force):
         return {}
     peaks = np.abs(sim.actuator_force).max(axis=0)
-    return {d: {"peak": round(float(p), 1), "limit": torque_limit(d)} for d, p in zip(sim.dof_names, peaks)}
+    return {d: {"peak": round(float(p), 1), "limit": torque_limit(d), "sourced": torque_limit_sourced(d)}
+            for d, p in zip(sim.dof_names, peaks)}
 
 
 # The reference's flight share is read at this frame rate at least (the simulation's per physics step).
