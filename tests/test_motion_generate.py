@@ -12,7 +12,7 @@ from stimuli.motion import quat
 from stimuli.motion.average import average_motion, cycle_of, dtw_distance
 from stimuli.motion.bvh import read_bvh
 from stimuli.motion.generate import GaitParams, generate
-from stimuli.motion.loop import seam_error, trim_cycles
+from stimuli.motion.loop import cycle_seams, seam_error, trim_cycles
 from stimuli.motion.metrics import gait_metrics, knee_angles, plausibility_from_joints
 from stimuli.motion.modifier import modify, thesis_parameters
 from stimuli.motion.style import params_for_actor
@@ -145,6 +145,27 @@ def test_an_average_of_motions_at_two_frame_rates_carries_their_contacts():
     flight = np.mean(~(contacts["l"] | contacts["r"]))
     own = np.mean(~(np.asarray(jogs[0].metadata["contacts"]["l"], bool) | np.asarray(jogs[0].metadata["contacts"]["r"], bool)))
     assert abs(flight - own) < 0.05, (flight, own)
+
+
+def test_an_average_of_loops_whose_cycles_differ_joins_its_cycles_smoothly():
+    """Exp 2 fills its clips with 4 walk cycles: 129 frames at 30 fps, 32.25 a cycle. Cut at frame
+    32, each actor's first cycle ended up to 27 mm of pelvis from where it began, and the average's
+    pelvis jumped 25 mm in one frame at every seam (3.2 times its largest step inside a cycle). A
+    capture's two looped cycles differ too (here: the pelvis sways 3 cm once per loop)."""
+    pace = GaitParams(gait="walk", cadence_spm=112, speed_mps=1.25)
+    walks = [generate(pace, h, fps=30, cycles=4) for h in (1.60, 1.66, 1.72)]
+    seams = cycle_seams(average_motion(walks, cycles=4, fps=30.0), 4)
+    assert seams["root_ratio"] < 1.5 and seams["joint_ratio"] < 1.5, seams
+
+    def swaying(height):
+        walk = generate(pace, height, fps=30, cycles=2)
+        root = walk.root_translation.copy()
+        root[:, 2] += 0.015 * np.cos(2 * np.pi * np.arange(walk.n_frames) / walk.n_frames)
+        return walk.replace(root_translation=root)
+
+    average = average_motion([swaying(1.60), swaying(1.72)], cycles=2, fps=30.0)
+    seams = cycle_seams(average, 2)
+    assert seams["root_ratio"] < 1.5 and seams["joint_ratio"] < 1.5, seams
 
 
 def test_higher_bmi_walks_wider_with_less_knee_flexion():

@@ -274,6 +274,7 @@ def test_exp2s_average_of_real_runs_stands_on_the_belt(tmp_path):
     feet move with the belt and stay out of the floor, as each run's do. Averaged joint by joint and
     left as it was, 29 % of its frames skated and a foot sank 48 mm (each run: 0 % and 0 mm)."""
     from stimuli.motion.average import protocol_average
+    from stimuli.motion.loop import cycle_seams
     from stimuli.motion.metrics import plausibility_from_joints
 
     if not MOCAP.is_dir():
@@ -289,6 +290,10 @@ def test_exp2s_average_of_real_runs_stands_on_the_belt(tmp_path):
     assert average.joint_names[0] == "root" and len(average.metadata["dtw_distances"]) == 4   # the runs, on Anny
     quality = plausibility_from_joints(average)
     assert quality["skate_humos_pct"] <= 5.0 and quality["penetrate_max_mm"] <= 5.0, quality
+    # Bandai's tired jog loops two cycles that differ and the runs' loops begin at other phases: the
+    # average's pelvis jumped 33 mm in one frame at every seam (and a knee 24°). (Its joints are not
+    # held to the join test: the cleaned CMU run turns its foot 26° in one 120-fps frame at heel strike.)
+    assert cycle_seams(average, 2)["root_ratio"] < 1.5, cycle_seams(average, 2)
 
 
 def test_render_refuses_a_bad_capture_before_making_anything(lab, tmp_path, capsys):

@@ -25,17 +25,59 @@ from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import role_indices
 
 
-def cycle_of(motion: Motion) -> Motion:
-    """One gait cycle (frames of the first whole cycle, end frame included for looping)."""
+def cycle_of(motion: Motion, fps: float | None = None) -> Motion:
+    """One gait cycle at ``fps`` (default the motion's), end frame included for looping.
+
+    A looped clip gives the mean of its cycles, each sampled over exactly one cycle's time at the same
+    phases (its own frames when a cycle is a whole number of them at its own rate). Its end frame then
+    repeats its first: the clip's cycle starts shift onto each other. Before, the first cycle was cut
+    at a whole frame: frame 32 of a 129-frame, 4-cycle generated walk (32.25 frames a cycle) stood
+    13–27 mm of pelvis away from frame 0; a capture's two looped cycles differ; and a 120-fps loop
+    resampled to 30 fps (CMU 35_17: 22.25 frames a cycle) got 23 frames, the last a quarter of a frame
+    before the first. The averages of such cycles jumped at every seam.
+    Any other clip gives its first whole cycle (heel strike to heel strike).
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> walk = generate(GaitParams(), 1.75, fps=30, cycles=4)
+    >>> cycle = cycle_of(walk)
+    >>> walk.n_frames, cycle.n_frames, bool(abs(cycle.root_translation[-1] - cycle.root_translation[0]).max() < 1e-9)
+    (129, 33, True)
+    >>> cycle_of(generate(GaitParams(), 1.75, fps=120, cycles=2), 30.0).n_frames   # 1.07 s: 32 frames at 30 fps, and the end
+    33
+    """
     from stimuli.motion.events import cycle_starts
-    if motion.metadata.get("looped"):
-        cycles = int(motion.metadata.get("cycles", 1))
-        n = motion.n_frames // max(cycles, 1)
-        rot = np.concatenate([motion.rotations[:n], motion.rotations[n:n + 1] if motion.n_frames > n else motion.rotations[:1]])
-        root = np.concatenate([motion.root_translation[:n], motion.root_translation[n:n + 1] if motion.n_frames > n else motion.root_translation[:1]])
-        return motion.replace(rotations=rot, root_translation=root)
-    hs = cycle_starts(motion)
-    return motion.slice(int(hs[0]), int(hs[1]) + 1)
+    fps = float(fps or motion.fps)
+    if not motion.metadata.get("looped"):
+        clip = motion if motion.fps == fps else motion.resample(fps)
+        hs = cycle_starts(clip)
+        return clip.slice(int(hs[0]), int(hs[1]) + 1)
+    cycles = max(int(motion.metadata.get("cycles", 1)), 1)
+    period = motion.n_frames / cycles                 # in the motion's own frames
+    n = max(int(round(period * fps / motion.fps)), 2)
+    phase = np.arange(n + 1) * (period / n)
+    samples = [_looped_frames(motion, k * period + phase) for k in range(cycles)]
+    rots = np.stack([r for r, _ in samples])
+    roots = np.stack([x for _, x in samples])
+    # Cycles that repeat frame for frame (a generated loop of whole-frame cycles) are kept as they are.
+    rot = rots[0] if np.array_equal(rots, np.broadcast_to(rots[:1], rots.shape)) else quat.mean(rots, axis=0)
+    root = roots[0] if np.array_equal(roots, np.broadcast_to(roots[:1], roots.shape)) else roots.mean(axis=0)
+    return motion.replace(fps=fps, rotations=rot, root_translation=root)
+
+
+def _looped_frames(motion: Motion, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations and root of a looped clip at (fractional) frame numbers; past its end it starts
+    again (an overground loop's root goes on from where it ended)."""
+    from stimuli.motion.loop import sample_periodic
+
+    whole = np.floor(frames).astype(int)
+    if not np.array_equal(whole, frames):
+        return sample_periodic(motion, frames / motion.fps)
+    rot = motion.rotations[whole % motion.n_frames]
+    root = motion.root_translation[whole % motion.n_frames].copy()
+    if not motion.metadata.get("treadmill"):
+        lap = motion.root_translation[-1] - motion.root_translation[0] + (motion.root_translation[-1] - motion.root_translation[-2])
+        root += (whole // motion.n_frames)[:, None] * lap
+    return rot, root
 
 
 def features(motion: Motion) -> np.ndarray:
@@ -109,20 +151,27 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
             raise StimuliError(f"average: motion {i + 1} has another skeleton than motion 1 "
                                "(retarget them to one rig first)")
     fps = fps or motions[0].fps
-    cyc = [cycle_of(m if m.fps == fps else m.resample(fps)) for m in motions]
+    cyc = [cycle_of(m, fps) for m in motions]
+    contacts = [_cycle_contacts(m, c.n_frames, fps) for m, c in zip(motions, cyc)]
+    if all(m.metadata.get("looped") for m in motions):
+        # A loop may begin anywhere in the gait cycle (a capture's at its first heel strike or where its
+        # seam matched best); DTW pins the cycles' ends together, so each loop first starts at the
+        # phase of the first one.
+        first = features(cyc[0])
+        shifts = [0] + [_phase_shift(first, features(c)) for c in cyc[1:]]
+        cyc = [_rolled(c, k) for c, k in zip(cyc, shifts)]
+        contacts = [None if c is None else c[_rolled_frames(len(c), k)] for c, k in zip(contacts, shifts)]
     feats = [features(c) for c in cyc]
     dist = np.array([[dtw_distance(a, b) if i < j else 0.0 for j, b in enumerate(cyc)] for i, a in enumerate(cyc)])
     dist = dist + dist.T
     ref = int(np.argmin(dist.sum(axis=1)))
     n = cyc[ref].n_frames
+    periodic = all(m.metadata.get("looped") for m in motions)
     rots = [[] for _ in range(n)]
     roots = [[] for _ in range(n)]
-    contacts = [_cycle_contacts(m, c.n_frames, fps) for m, c in zip(motions, cyc)]
     votes = np.zeros((n, 2))
     for c, f, contact in zip(cyc, feats, contacts):
-        per_frame: dict[int, list[int]] = {}
-        for i, j in _path(feats[ref], f):
-            per_frame.setdefault(i, []).append(j)
+        per_frame = _periodic_matches(feats[ref], f) if periodic else _matches(feats[ref], f)
         for i in range(n):
             js = per_frame.get(i, [i])
             rots[i].append(quat.mean(c.rotations[js]))
@@ -139,8 +188,8 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
             "gait": motions[0].metadata.get("gait"), "roles": motions[0].metadata.get("roles"),
             "naming": motions[0].metadata.get("naming"), **_mean_body(motions)}
     avg = Motion(fps, names, motions[0].parents, offsets, quat.unroll(rot), root, meta)
-    # Averages of looped clips are periodic already: drop the end frame; otherwise close the loop.
-    periodic = all(m.metadata.get("looped") for m in motions)
+    # Averages of looped clips are periodic (their cycles are closed and matched around the loop): drop
+    # the end frame; otherwise close the loop.
     looped = avg.slice(0, avg.n_frames - 1) if periodic else close_loop(avg)
     looped.metadata["looped"] = True
     looped.metadata.update(cycles=1, cadence_spm=120.0 * fps / (n - 1))
@@ -149,6 +198,74 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
         down = np.tile(votes[: n - 1] / len(motions) >= 0.5, (max(cycles, 1), 1))
         out.metadata["contacts"] = {s: down[:, k].astype(int).tolist() for k, s in enumerate("lr")}
     return out
+
+
+def _matches(ref: np.ndarray, other: np.ndarray) -> dict[int, list[int]]:
+    """Per frame of ``ref``, the frames of ``other`` on their DTW warping path (ends pinned together)."""
+    per_frame: dict[int, list[int]] = {}
+    for i, j in _path(ref, other):
+        per_frame.setdefault(i, []).append(j)
+    return per_frame
+
+
+def _periodic_matches(ref: np.ndarray, other: np.ndarray) -> dict[int, list[int]]:
+    """:func:`_matches` for closed cycles (end frame repeating the first), matched around the loop.
+
+    DTW pins the first frames together and the last; at a loop's seam that forces the path onto
+    the two cycles' start frames even where the gait phase says otherwise, and the average's frames
+    next to its seam mixed poses a frame or two apart (the men's capture-average walk: an ankle
+    turning 12° more in one frame than anywhere inside the cycle). Here both cycles are extended by
+    a quarter cycle around their seam, the extended copies are aligned, and the middle of the path
+    is kept; the end frame matches as the first does.
+
+    >>> t = np.linspace(0, 2 * np.pi, 25)[:, None]
+    >>> m = _periodic_matches(np.sin(t), np.sin(t))
+    >>> all(m[i] == [i] for i in range(24)), m[24]
+    (True, [0])
+    """
+    n, m = len(ref) - 1, len(other) - 1
+    pad_r, pad_o = max(n // 4, 1), max(m // 4, 1)
+    ext_r = ref[np.arange(-pad_r, n + pad_r) % n]
+    ext_o = other[np.arange(-pad_o, m + pad_o) % m]
+    per_frame: dict[int, list[int]] = {}
+    for i, j in _path(ext_r, ext_o):
+        if pad_r <= i < n + pad_r:
+            per_frame.setdefault(i - pad_r, []).append((j - pad_o) % m)
+    per_frame[n] = list(per_frame[0])
+    return per_frame
+
+
+def _phase_shift(ref: np.ndarray, other: np.ndarray) -> int:
+    """The frames by which to roll a closed cycle (its per-frame features ``other``, end frame
+    included) so that its gait phase lines up with ``ref``'s: least squares over the circular
+    shifts, ``other`` resampled to ``ref``'s number of frames.
+
+    >>> t = np.linspace(0, 2 * np.pi, 21)[:, None]
+    >>> _phase_shift(np.sin(t), np.sin(t + 2 * np.pi * 5 / 20))   # starts 5 frames later in phase
+    15
+    """
+    r, o = ref[:-1], other[:-1]
+    n, m = len(r), len(o)
+    x = np.arange(n) * m / n
+    i0 = np.floor(x).astype(int)
+    a = (x - i0)[:, None]
+    on_ref = o[i0 % m] * (1 - a) + o[(i0 + 1) % m] * a
+    costs = [float(np.sum((r - np.roll(on_ref, -k, axis=0)) ** 2)) for k in range(n)]
+    return int(round(int(np.argmin(costs)) * m / n)) % m
+
+
+def _rolled_frames(frames: int, shift: int) -> np.ndarray:
+    """Indices of a closed cycle of ``frames`` (end frame repeating the first) started ``shift`` later."""
+    unique = frames - 1
+    return (np.arange(frames) + shift) % unique
+
+
+def _rolled(cycle: Motion, shift: int) -> Motion:
+    """A closed cycle started ``shift`` frames later (still closed)."""
+    if shift == 0:
+        return cycle
+    idx = _rolled_frames(cycle.n_frames, shift)
+    return cycle.replace(rotations=cycle.rotations[idx], root_translation=cycle.root_translation[idx])
 
 
 def _cycle_contacts(motion: Motion, n: int, fps: float | None = None) -> np.ndarray | None:

@@ -230,6 +230,35 @@ def seam_error(motion: Motion) -> dict:
             "seam_step_m": jump, "interior_step_p99_m": step}
 
 
+def cycle_seams(motion: Motion, cycles: int | None = None) -> dict:
+    """How smooth the joins between the repeated cycles of a looped clip are.
+
+    :func:`seam_error` compares the wrap-around with the clip's 99th percentile, which in a clip of
+    4 or 5 repeated cycles holds the other joins too. This takes one cycle (``cycles``, default the
+    metadata's) as periodic and divides the root's second difference at the join (the two frames
+    either side) by its largest inside the cycle, and the largest change of a joint's angular step
+    there by the largest inside: ratios ≈ 1 or less are seamless.
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> seams = cycle_seams(generate(GaitParams(), 1.75, fps=30, cycles=2))
+    >>> seams["root_ratio"] < 1.5 and seams["joint_ratio"] < 1.5
+    True
+    """
+    cycles = int(cycles or motion.metadata.get("cycles", 1) or 1)
+    n = motion.n_frames // cycles
+    root = motion.root_translation[:n]
+    rot = quat.unroll(motion.rotations[:n])
+    root_acc = np.linalg.norm(np.roll(root, -1, 0) - 2 * root + np.roll(root, 1, 0), axis=1)
+    step = quat.angle(quat.mul(quat.inv(rot), np.roll(rot, -1, 0)))
+    joint_acc = np.abs(step - np.roll(step, 1, 0)).max(axis=1)
+    # A jump between two frames shows in the second differences at both: frames next to the join count
+    # as the join (a jump one frame before it is still the join's).
+    join = [-2, -1, 0, 1]
+    return {"root_ratio": float(root_acc[join].max() / max(root_acc[2:-2].max(), 1e-12)),
+            "joint_ratio": float(joint_acc[join].max() / max(joint_acc[2:-2].max(), 1e-12)),
+            "root_accel_m": float(root_acc[join].max())}
+
+
 # Seam matching: a velocity mismatch of v (m/s) costs like a position mismatch of v × SEAM_TAU_S,
 # about the half-width of close_loop's 0.2-s velocity correction over which it is spread.
 SEAM_TAU_S = 0.1
