@@ -153,7 +153,8 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
     fps = fps or motions[0].fps
     cyc = [cycle_of(m, fps) for m in motions]
     contacts = [_cycle_contacts(m, c.n_frames, fps) for m, c in zip(motions, cyc)]
-    if all(m.metadata.get("looped") for m in motions):
+    periodic = all(m.metadata.get("looped") for m in motions)
+    if periodic:
         # A loop may begin anywhere in the gait cycle (a capture's at its first heel strike or where its
         # seam matched best); DTW pins the cycles' ends together, so each loop first starts at the
         # phase of the first one.
@@ -166,7 +167,6 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
     dist = dist + dist.T
     ref = int(np.argmin(dist.sum(axis=1)))
     n = cyc[ref].n_frames
-    periodic = all(m.metadata.get("looped") for m in motions)
     rots = [[] for _ in range(n)]
     roots = [[] for _ in range(n)]
     votes = np.zeros((n, 2))
@@ -261,11 +261,16 @@ def _rolled_frames(frames: int, shift: int) -> np.ndarray:
 
 
 def _rolled(cycle: Motion, shift: int) -> Motion:
-    """A closed cycle started ``shift`` frames later (still closed)."""
+    """A closed cycle started ``shift`` frames later (still closed; an overground cycle's root goes on
+    by one cycle's travel past its end)."""
     if shift == 0:
         return cycle
     idx = _rolled_frames(cycle.n_frames, shift)
-    return cycle.replace(rotations=cycle.rotations[idx], root_translation=cycle.root_translation[idx])
+    root = cycle.root_translation[idx]
+    if not cycle.metadata.get("treadmill"):
+        laps = (np.arange(cycle.n_frames) + shift) // (cycle.n_frames - 1)
+        root = root + laps[:, None] * (cycle.root_translation[-1] - cycle.root_translation[0])
+    return cycle.replace(rotations=cycle.rotations[idx], root_translation=root)
 
 
 def _cycle_contacts(motion: Motion, n: int, fps: float | None = None) -> np.ndarray | None:
