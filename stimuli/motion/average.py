@@ -92,8 +92,12 @@ def features(motion: Motion) -> np.ndarray:
 
 def dtw_distance(a: Motion, b: Motion) -> float:
     """DTW distance between the pelvis-relative, height-normalised poses of two motions."""
+    return _feature_distance(features(a), features(b))
+
+
+def _feature_distance(a: np.ndarray, b: np.ndarray) -> float:
     from dtaidistance import dtw_ndim
-    return float(dtw_ndim.distance(features(a).astype(np.double), features(b).astype(np.double)))
+    return float(dtw_ndim.distance(a.astype(np.double), b.astype(np.double)))
 
 
 def _path(ref: np.ndarray, other: np.ndarray) -> list[tuple[int, int]]:
@@ -154,16 +158,17 @@ def average_motion(motions: list[Motion], cycles: int = 2, fps: float | None = N
     cyc = [cycle_of(m, fps) for m in motions]
     contacts = [_cycle_contacts(m, c.n_frames, fps) for m, c in zip(motions, cyc)]
     periodic = all(m.metadata.get("looped") for m in motions)
+    feats = [features(c) for c in cyc]
     if periodic:
         # A loop may begin anywhere in the gait cycle (a capture's at its first heel strike or where its
         # seam matched best); DTW pins the cycles' ends together, so each loop first starts at the
-        # phase of the first one.
-        first = features(cyc[0])
-        shifts = [0] + [_phase_shift(first, features(c)) for c in cyc[1:]]
+        # phase of the first one (its pelvis-relative features roll with it).
+        shifts = [0] + [_phase_shift(feats[0], f) for f in feats[1:]]
+        rolls = [_rolled_frames(c.n_frames, k) for c, k in zip(cyc, shifts)]
         cyc = [_rolled(c, k) for c, k in zip(cyc, shifts)]
-        contacts = [None if c is None else c[_rolled_frames(len(c), k)] for c, k in zip(contacts, shifts)]
-    feats = [features(c) for c in cyc]
-    dist = np.array([[dtw_distance(a, b) if i < j else 0.0 for j, b in enumerate(cyc)] for i, a in enumerate(cyc)])
+        feats = [f[r] for f, r in zip(feats, rolls)]
+        contacts = [None if c is None else c[r] for c, r in zip(contacts, rolls)]
+    dist = np.array([[_feature_distance(a, b) if i < j else 0.0 for j, b in enumerate(feats)] for i, a in enumerate(feats)])
     dist = dist + dist.T
     ref = int(np.argmin(dist.sum(axis=1)))
     n = cyc[ref].n_frames

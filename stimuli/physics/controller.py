@@ -251,8 +251,8 @@ def torque_limit(dof: str) -> float:
     >>> torque_limit("knee.L"), torque_limit("hip.R:X"), torque_limit("hip.R:Z"), torque_limit("ankle.L:Z")
     (197.0, 195.0, 91.0, 35.0)
     """
-    joint, _, axis = dof.partition(":")
-    return TORQUE_LIMITS_NM[joint.split(".")[0]][axis]
+    joint, axis = _joint_axis(dof)
+    return TORQUE_LIMITS_NM[joint][axis]
 
 
 def torque_limit_sourced(dof: str) -> bool:
@@ -261,8 +261,13 @@ def torque_limit_sourced(dof: str) -> bool:
     >>> torque_limit_sourced("knee.L"), torque_limit_sourced("ankle.R:Z"), torque_limit_sourced("spine:X")
     (True, True, False)
     """
+    return _joint_axis(dof) in SOURCED_LIMITS
+
+
+def _joint_axis(dof: str) -> tuple[str, str]:
+    """``("hip", "X")`` of ``hip.R:X``, ``("knee", "")`` of ``knee.L``: the keys of the limit tables."""
     joint, _, axis = dof.partition(":")
-    return (joint.split(".")[0], axis) in SOURCED_LIMITS
+    return joint.split(".")[0], axis
 
 
 def set_torque_limits(model, limits: dict[str, float] | None = None) -> np.ndarray:
