@@ -217,23 +217,48 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
 # Elbow flexion/extension: Lategan & Krüger (2003), Afr J Phys Health Educ Recreat Dance, special
 # edition 165–172, abstract: 199 young men, concentric isokinetic (Cybex 340), flexion 78 % and
 # extension 67 % of body mass (N·m per kg × 100): 55 N·m.
-# These are concentric (isokinetic) peaks, below an isometric maximum; every sourced figure was read in
-# a reachable abstract or table, none of the papers is in ../shared/seeds.
+# Neck (X flexion/extension, Z lateral bending, Y axial rotation): "Prediction of three-dimensional
+# maximum isometric neck strength", Ann Biomed Eng 2014, doi:10.1007/s10439-014-1046-0, abstract:
+# 9 men (29 ± 9 years), maximum isometric moments flexion 30 ± 6, lateral bending 32 ± 9, extension
+# 51 ± 11, axial rotation 13 ± 5 N·m: 51, 32 and 13 N·m.
+# Shoulder flexion/extension (X): "Dynamic shoulder flexion strength for use in occupational risk
+# analysis and clinical assessment", abstract: 26 young men, static flexion torque at 0° (anatomical
+# position) 89.9 N·m (45°: 68.6; concentric at 50°/s: 46.9): 90 N·m. Extension is stronger than
+# flexion by 5:4 ("Isokinetic testing of shoulder strength: normal values", Arch Phys Med Rehabil
+# 1985;66:384–386, abstract), which this symmetric actuator does not carry.
+# Shoulder ab-/adduction (Z): "Isokinetic muscle strength parameters for shoulder movements", Clin
+# Biomech 1989, doi:10.1016/0268-0033(89)90046-6, abstract: 20 men (25 years), the adductors, the
+# strongest group, 48.0 N·m peak (women 28.8): 48 N·m.
+# Shoulder rotation (Y): Clinics (São Paulo) 2011;66(2):313–320, doi:10.1590/S1807-59322011000200022,
+# Table 1: concentric internal rotation at 60°/s of the uninjured shoulders of 33 athletes treated for
+# a shoulder injury, 59.5 (n = 15) and 65.3 N·m (n = 18), external 34.3 and 34.5: 63 N·m (the mean).
+# Spine flexion/extension (X): Chaffin, Andersson & Martin, Occupational Biomechanics (3rd ed., 1999),
+# Table 4.5, maximal torso extension of men at 20° of flexion, 288 N·m, as quoted in J Electromyogr
+# Kinesiol 2012;22(6):814–820, Table 2 (doi:10.1016/j.jelekin.2012.04.006): 288 N·m.
+# The isokinetic figures (hip abduction, ankle inversion, elbow, shoulder rotation and adduction) are
+# concentric peaks, below an isometric maximum; every figure was read in a reachable abstract or
+# table (not the paper itself where only an abstract is named), none is in ../shared/seeds.
 #
-# PROVENANCE NOT CHECKED for every other axis: spine, neck, shoulder, hip rotation and ankle rotation
-# were rounded from memory of Harbo, Brincks & Andersen (2012), Eur J Appl Physiol 112:267–275
-# (isometric Biodex peak torques, sex-specific regressions on age, height and body mass; only its
-# abstract is reachable) and have no published figure behind them here.
+# PROVENANCE NOT CHECKED for the remaining axes, spine lateral bending and axial rotation, hip rotation
+# and ankle rotation: they were rounded from memory of Harbo, Brincks & Andersen (2012), Eur J Appl
+# Physiol 112:267–275 (isometric Biodex peak torques, sex-specific regressions on age, height and body
+# mass; only its abstract is reachable) and have no published figure behind them here.
 NORM_BODY_MASS_KG = 23.0 * 1.75**2                            # the base character
 NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * NORM_BODY_MASS_KG * 1.75  # its weight (N) × height (m)
 ANDERSON_2007_C1 = {"hip": 0.161, "knee": 0.163, "ankle": 0.095}
 SUGIMOTO_2014_HIP_ABDUCTION_NM_PER_KG = 1.29
 DA_FONSECA_2025_ANKLE_INVERSION_NM = 34.8
 LATEGAN_2003_ELBOW_FLEXION_NM_PER_KG = 0.78
+NECK_ISOMETRIC_2014_NM = {"X": 51.0, "Z": 32.0, "Y": 13.0}   # extension, lateral bending, axial rotation
+SHOULDER_FLEXION_STATIC_NM = 89.9
+SHOULDER_ADDUCTION_1989_NM = 48.0
+SHOULDER_INTERNAL_ROTATION_2011_NM = (15 * 59.5 + 18 * 65.3) / 33
+CHAFFIN_1999_TORSO_EXTENSION_NM = 288.0
 TORQUE_LIMITS_NM = {
-    "spine": {"X": 250.0, "Z": 200.0, "Y": 100.0},
-    "neck": {"X": 60.0, "Z": 50.0, "Y": 30.0},
-    "shoulder": {"X": 100.0, "Z": 100.0, "Y": 60.0},
+    "spine": {"X": CHAFFIN_1999_TORSO_EXTENSION_NM, "Z": 200.0, "Y": 100.0},
+    "neck": dict(NECK_ISOMETRIC_2014_NM),
+    "shoulder": {"X": float(round(SHOULDER_FLEXION_STATIC_NM)), "Z": SHOULDER_ADDUCTION_1989_NM,
+                 "Y": float(round(SHOULDER_INTERNAL_ROTATION_2011_NM))},
     "elbow": {"": float(round(LATEGAN_2003_ELBOW_FLEXION_NM_PER_KG * NORM_BODY_MASS_KG))},
     "hip": {"X": float(round(ANDERSON_2007_C1["hip"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
             "Z": float(round(SUGIMOTO_2014_HIP_ABDUCTION_NM_PER_KG * NORM_BODY_MASS_KG)), "Y": 80.0},
@@ -242,7 +267,9 @@ TORQUE_LIMITS_NM = {
               "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)), "Y": 40.0},
 }
 # The axes whose limit has a published figure behind it (above); the report says which these are.
-SOURCED_LIMITS = {("hip", "X"), ("hip", "Z"), ("knee", ""), ("ankle", "X"), ("ankle", "Z"), ("elbow", "")}
+SOURCED_LIMITS = {("hip", "X"), ("hip", "Z"), ("knee", ""), ("ankle", "X"), ("ankle", "Z"), ("elbow", ""),
+                  ("neck", "X"), ("neck", "Z"), ("neck", "Y"), ("shoulder", "X"), ("shoulder", "Z"),
+                  ("shoulder", "Y"), ("spine", "X")}
 
 
 def torque_limit(dof: str) -> float:
@@ -258,7 +285,7 @@ def torque_limit(dof: str) -> float:
 def torque_limit_sourced(dof: str) -> bool:
     """Whether the limit of a ragdoll DoF has a published figure behind it (:data:`SOURCED_LIMITS`).
 
-    >>> torque_limit_sourced("knee.L"), torque_limit_sourced("ankle.R:Z"), torque_limit_sourced("spine:X")
+    >>> torque_limit_sourced("knee.L"), torque_limit_sourced("neck:Y"), torque_limit_sourced("spine:Z")
     (True, True, False)
     """
     return _joint_axis(dof) in SOURCED_LIMITS
