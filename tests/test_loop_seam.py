@@ -95,3 +95,29 @@ def test_rendered_loops_are_seamless_on_their_bodies(rendered_loops):
                    _largest_pitch_step(on_body, ("foot.L", "foot.R")))
              for key, (source, on_body) in rendered_loops.items()}
     assert all(on_body < source + 5.0 for source, on_body in steps.values()), steps
+
+
+def test_toe_lift_fades_out_after_toe_off_instead_of_ending_in_one_frame():
+    """A foot leaving the floor toes-down needs its toes lifted for two frames: the lift then fades
+    at the given rate through the first half of the swing (the cleaned CMU 35_17 run and 07_12
+    walk turned a foot 31° and 39° in one 30-fps frame at toe off, where the captures turn 21°
+    and 25°), and the second half keeps its own (none here)."""
+    n = 10
+    swing = np.ones(n, bool)
+    swing[[0, 9]] = False                                        # stance, swing 1-8, stance
+    toe_down = np.array([[0.0, -0.02, -0.05], [0.0, -0.12, 0.12]])
+    offsets = np.repeat(toe_down[None], n, axis=0)
+    ankle = np.tile([0.0, 0.12, 0.0], (n, 1))                    # the toe tip on the floor
+    floor = np.zeros(n)
+    floor[[1, 2]] = 0.02                                         # 2 cm of clearance wanted, then none
+    feet = np.tile([1.0, 0, 0, 0], (n, 1))
+
+    def turns(**kw):
+        out = lift_toes(ankle, feet, offsets, floor, swing, **kw)
+        return np.degrees(quat.angle(out))
+
+    abrupt, faded = turns(), turns(max_rate=np.radians(3.0))
+    assert abrupt[2] > 8 and abrupt[3] == 0                      # ended within one frame
+    assert faded[2] == pytest.approx(abrupt[2])
+    assert faded[3] == pytest.approx(abrupt[2] - 3) and faded[4] == pytest.approx(abrupt[2] - 6)
+    assert np.all(faded[5:] == 0) and faded[0] == 0              # second half and stance untouched

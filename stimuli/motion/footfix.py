@@ -49,6 +49,11 @@ MAX_TOE_LIFT_DEG = 15.0
 TOE_LIFT_GAIN_M = 0.001
 # How long a contact's correction takes to blend in before it and out after it (4 frames at 30 fps).
 BLEND_S = 4.0 / 30.0
+# Fastest change of a swinging foot's toe lift (deg/s): the normative walk's own dorsiflexion speed
+# in early swing (CGM2.3 mean ankle curve, stimuli/data/cgm23_walk.json: 131–144°/s at a 1.0–1.1 s
+# stride). Set per frame, a lift ended within one frame: CMU 07_12's foot turned 39° in one 30-fps
+# frame at toe off, where the capture turns 25°.
+TOE_LIFT_RATE_DEG_S = 140.0
 # How much faster than the source's a cleaned-up knee may turn, degrees per second (1.5° per 30-fps
 # frame; issue 20's bound on knee snapping is the capture's largest change per 30-fps frame + 2°).
 KNEE_RATE_DPS = 45.0
@@ -395,7 +400,7 @@ def offsets_of(foot: np.ndarray, local: np.ndarray) -> np.ndarray:
 
 
 def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: np.ndarray,
-              swing: np.ndarray) -> np.ndarray:
+              swing: np.ndarray, max_rate: float | None = None, cyclic: bool = False) -> np.ndarray:
     """Foot rotations with a swinging foot's toes turned up (about the ankle, at most
     :data:`MAX_TOE_LIFT_DEG`) where its lowest sole point would pass below ``floor`` (T).
 
@@ -409,6 +414,9 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     a heel that is already the lowest point goes down as the toes come up, then up again, and a
     walk's last frame before heel strike turned its toes up 15° for 0.06 mm (on 4-cycle loops,
     whose seam then read 1.9–2.2; three women's walks pitched a foot 30–36° in one frame).
+    ``max_rate`` (radians per frame): in the first half of each swing the lift then falls no faster
+    than this — it fades out over the frames after the last that needs it instead of ending at once;
+    ``cyclic``: a swing across the clip's end goes on at its start.
 
     >>> toe_down = np.array([[[0.0, -0.02, -0.05], [0.0, -0.12, 0.12]]])  # heel, toe tip: toes pointing down
     >>> f = lift_toes(np.array([[0.0, 0.12, 0.0]]), np.array([[1.0, 0, 0, 0]]), toe_down, np.array([0.02]),
@@ -424,10 +432,11 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
         return out
     # Toes up: a turn about the horizontal axis across the foot, forward (heel → toe tip, the
     # first and last sole points) × up.
-    fwd = offsets[todo, -1] - offsets[todo, 0]
-    fwd[:, 1] = 0.0
-    fwd /= np.maximum(np.linalg.norm(fwd, axis=1, keepdims=True), 1e-12)
-    axis = np.cross(fwd, np.array([0.0, 1.0, 0.0]))
+    fwd_all = offsets[:, -1] - offsets[:, 0]
+    fwd_all[:, 1] = 0.0
+    fwd_all /= np.maximum(np.linalg.norm(fwd_all, axis=1, keepdims=True), 1e-12)
+    axis_all = np.cross(fwd_all, np.array([0.0, 1.0, 0.0]))
+    axis = axis_all[todo]
     angles = np.radians(np.arange(0.0, MAX_TOE_LIFT_DEG + 0.25, 0.5))
     turns = quat.from_axis_angle(axis[:, None] * angles[None, :, None])          # todo × angles × 4
     lows = ankle[todo, 1, None] + quat.rotate(turns[:, :, None], offsets[todo][:, None])[..., 1].min(axis=2)
@@ -442,8 +451,33 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     rows = np.arange(len(todo))
     gain = np.minimum(lows[rows, best], floor[todo]) - np.minimum(lows[rows, pick], floor[todo])
     pick = np.where(gain >= TOE_LIFT_GAIN_M, best, pick)
-    out[todo] = quat.mul(quat.from_axis_angle(axis * angles[pick][:, None]), foot[todo])
+    lift = np.zeros(len(foot))
+    lift[todo] = angles[pick]
+    if max_rate is not None:
+        # After toe off: later in swing the foot turns toes-up by itself, and a lift carried on
+        # lowered the heel for landing (CMU 07_01: 23° more toes-up than the capture, then 38° in
+        # one frame at heel strike).
+        lift = rate_limited_envelope(lift, early_stance(swing, cyclic), max_rate, cyclic)
+    turned = np.flatnonzero(lift > 0)
+    out[turned] = quat.mul(quat.from_axis_angle(axis_all[turned] * lift[turned, None]), foot[turned])
     return out
+
+
+def rate_limited_envelope(x: np.ndarray, inside: np.ndarray, rate: float, cyclic: bool = False) -> np.ndarray:
+    """The least values ≥ ``x`` that fall by at most ``rate`` per frame within each run of
+    ``inside`` frames (``x`` itself outside them); ``cyclic``: a run across the end goes on at the start.
+
+    >>> rate_limited_envelope(np.array([0, 0, 3.0, 0, 0, 0.5]), np.array([0, 1, 1, 1, 1, 0], bool), 1.0)
+    array([0. , 0. , 3. , 2. , 1. , 0.5])
+    """
+    x = np.asarray(x, float).copy()
+    shift = int(np.argmin(inside)) if cyclic and not inside.all() else 0
+    y = np.roll(x, -shift)
+    ins = np.roll(inside, -shift)
+    for t in range(1, len(y)):
+        if ins[t] and ins[t - 1]:
+            y[t] = max(y[t], y[t - 1] - rate)
+    return np.roll(y, shift)
 
 
 def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
@@ -531,7 +565,8 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
                 targets[s][free[s]] = follow[free[s]]
             # Never below the ground, in or out of contact; clear it in swing.
             floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(motion.n_frames)
-            feet[s] = lift_toes(targets[s], feet[s], offsets_of(feet[s], foot_offsets[s]), floor, ~contacts[s])
+            feet[s] = lift_toes(targets[s], feet[s], offsets_of(feet[s], foot_offsets[s]), floor, ~contacts[s],
+                                max_rate=np.radians(TOE_LIFT_RATE_DEG_S) / motion.fps, cyclic=cyclic)
             low = offsets_of(feet[s], foot_offsets[s])[:, :, 1].min(axis=1)
             targets[s][:, 1] += np.maximum(0.0, floor - (low + targets[s][:, 1]))
         root = lowered
