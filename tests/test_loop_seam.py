@@ -121,3 +121,29 @@ def test_toe_lift_fades_out_after_toe_off_instead_of_ending_in_one_frame():
     assert faded[2] == pytest.approx(abrupt[2])
     assert faded[3] == pytest.approx(abrupt[2] - 3) and faded[4] == pytest.approx(abrupt[2] - 6)
     assert np.all(faded[5:] == 0) and faded[0] == 0              # second half and stance untouched
+
+
+def test_toe_lift_of_a_heel_landing_comes_down_to_none_at_the_rate_before_it_lands():
+    """A foot already toes-up 40° before heel strike, its heel under the swing clearance: turning
+    the toes up further raises that heel, and without a rate the lift was its full amount up to
+    the frame before landing, where the clean-up lays the foot flat (CMU 07_02: 41° in one frame,
+    the capture 13°). With one it is at most the rate times the frames left to the landing."""
+    n = 10
+    swing = np.ones(n, bool)
+    swing[[0, 9]] = False
+    foot = np.tile(quat.from_axis_angle(np.array([-np.radians(40.0), 0.0, 0.0])), (n, 1))   # toes up
+    local = np.array([[0.0, -0.08, -0.05], [0.0, -0.03, 0.15]])                           # heel, toe tip
+    offsets = quat.rotate(foot[:, None], np.repeat(local[None], n, axis=0))
+    assert offsets[0, 1, 1] > offsets[0, 0, 1]                   # the toe tip above the heel
+    ankle = np.tile([0.0, -offsets[0, 0, 1] + 0.002, 0.0], (n, 1))   # the heel 2 mm over the floor
+    floor = np.zeros(n)
+    floor[[7, 8]] = 0.008                                        # 8 mm of clearance wanted late in swing
+    rate = np.radians(3.0)
+
+    def lifts(**kw):
+        out = lift_toes(ankle, foot, offsets, floor, swing, **kw)
+        return np.degrees(quat.angle(quat.mul(out, quat.inv(foot))))
+
+    abrupt, capped = lifts(), lifts(max_rate=rate)
+    assert abrupt[8] > 6                                         # a big turn in the last frame of swing
+    assert capped[8] <= 3 + 1e-9 and capped[7] <= 6 + 1e-9 and capped[8] > 0

@@ -415,8 +415,9 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     walk's last frame before heel strike turned its toes up 15° for 0.06 mm (on 4-cycle loops,
     whose seam then read 1.9–2.2; three women's walks pitched a foot 30–36° in one frame).
     ``max_rate`` (radians per frame): in the first half of each swing the lift then falls no faster
-    than this — it fades out over the frames after the last that needs it instead of ending at once;
-    ``cyclic``: a swing across the clip's end goes on at its start.
+    than this — it fades out over the frames after the last that needs it instead of ending at once —
+    and a toes-up foot's lift is at most this times the frames left to its landing; ``cyclic``: a
+    swing across the clip's end goes on at its start.
 
     >>> toe_down = np.array([[[0.0, -0.02, -0.05], [0.0, -0.12, 0.12]]])  # heel, toe tip: toes pointing down
     >>> f = lift_toes(np.array([[0.0, 0.12, 0.0]]), np.array([[1.0, 0, 0, 0]]), toe_down, np.array([0.02]),
@@ -458,8 +459,33 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
         # lowered the heel for landing (CMU 07_01: 23° more toes-up than the capture, then 38° in
         # one frame at heel strike).
         lift = rate_limited_envelope(lift, early_stance(swing, cyclic), max_rate, cyclic)
+        # … and a foot already toes-up (a heel landing) comes down to none at landing no faster
+        # either (lifted 15° in the two frames before heel strike, CMU 07_02's foot was laid flat
+        # by 41° in one frame; the capture 13°). A toes-down foot (a forefoot landing) keeps its
+        # lift, which turns it towards the flat foot it lands as.
+        toes_up = quat.rotate(foot, np.array([0.0, 0.0, 1.0]))[:, 1] > 0
+        lift = np.where(toes_up, np.minimum(lift, max_rate * frames_to_contact(swing, cyclic)), lift)
     turned = np.flatnonzero(lift > 0)
     out[turned] = quat.mul(quat.from_axis_angle(axis_all[turned] * lift[turned, None]), foot[turned])
+    return out
+
+
+def frames_to_contact(swing: np.ndarray, cyclic: bool = False) -> np.ndarray:
+    """Per frame, how many frames on the next frame out of ``swing`` is (0 there; a swing running
+    off the end of a clip that does not loop counts to the end).
+
+    >>> frames_to_contact(np.array([0, 1, 1, 1, 0, 1], bool)), frames_to_contact(np.array([0, 1, 1, 1, 0, 1], bool), True)
+    (array([0, 3, 2, 1, 0, 1]), array([0, 3, 2, 1, 0, 1]))
+    """
+    n = len(swing)
+    out = np.zeros(n, int)
+    reps = 2 if cyclic else 1
+    s = np.tile(swing, reps)
+    count = 0
+    for t in range(len(s) - 1, -1, -1):
+        count = count + 1 if s[t] else 0
+        if t < n:
+            out[t] = count
     return out
 
 
