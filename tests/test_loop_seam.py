@@ -147,3 +147,24 @@ def test_toe_lift_of_a_heel_landing_comes_down_to_none_at_the_rate_before_it_lan
     abrupt, capped = lifts(), lifts(max_rate=rate)
     assert abrupt[8] > 6                                         # a big turn in the last frame of swing
     assert capped[8] <= 3 + 1e-9 and capped[7] <= 6 + 1e-9 and capped[8] > 0
+
+
+def test_a_carried_toe_lift_keeps_the_axis_it_had_where_it_was_needed():
+    """After toe off the foot turns 30° about the vertical between two frames: the lift carried into
+    the second frame turns about the axis it had in the first (recomputed from the new heading, the
+    hold-out Poser walk's foot turned 34.6° in one frame where the capture turns 17°)."""
+    n = 10
+    swing = np.ones(n, bool)
+    swing[[0, 9]] = False                                       # the first half of the swing: 1-4
+    toe_down = np.array([[0.0, -0.02, -0.05], [0.0, -0.12, 0.12]])
+    yaw = np.radians([0.0, 0.0, 0.0] + [30.0] * 7)
+    foot = quat.from_axis_angle(np.stack([0 * yaw, yaw, 0 * yaw], -1))
+    offsets = quat.rotate(foot[:, None], np.repeat(toe_down[None], n, axis=0))
+    ankle = np.tile([0.0, 0.12, 0.0], (n, 1))
+    floor = np.zeros(n)
+    floor[[1, 2]] = 0.02
+    out = lift_toes(ankle, foot, offsets, floor, swing, max_rate=np.radians(3.0))
+    turns = quat.mul(out, quat.inv(foot))                       # the lift, in the world
+    axis = turns[:, 1:] / np.maximum(np.linalg.norm(turns[:, 1:], axis=1, keepdims=True), 1e-12)
+    assert np.degrees(quat.angle(turns[3:4]))[0] > 1          # carried into the turned frame …
+    assert np.allclose(axis[3], axis[2], atol=1e-9)             # … about the first frame's axis

@@ -292,7 +292,7 @@ def test_exp2s_average_of_real_runs_stands_on_the_belt(tmp_path):
     assert quality["skate_humos_pct"] <= 5.0 and quality["penetrate_max_mm"] <= 5.0, quality
     # Bandai's tired jog loops two cycles that differ and the runs' loops begin at other phases: the
     # average's pelvis jumped 33 mm in one frame at every seam (and a knee 24°). The joints' join read
-    # 1.78 while the clean-up's toe lift ended within a frame at the CMU run's toe off (now 1.22).
+    # 1.78 while the clean-up's toe lift ended within a frame at the CMU run's toe off (now 1.36).
     seams = cycle_seams(average, 2)
     assert seams["root_ratio"] < 1.5 and seams["joint_ratio"] < 1.5, seams
 

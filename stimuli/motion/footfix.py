@@ -457,8 +457,11 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     if max_rate is not None:
         # After toe off: later in swing the foot turns toes-up by itself, and a lift carried on
         # lowered the heel for landing (CMU 07_01: 23° more toes-up than the capture, then 38° in
-        # one frame at heel strike).
-        lift = rate_limited_envelope(lift, early_stance(swing, cyclic), max_rate, cyclic)
+        # one frame at heel strike). A carried lift keeps the axis it had where it was needed:
+        # recomputed from the next frames' heading, it turned the foot sideways where the capture
+        # turns it about its long axis (the hold-out Poser walk: 34.6° in one frame, capture 17°).
+        lift, origin = rate_limited_envelope(lift, early_stance(swing, cyclic), max_rate, cyclic)
+        axis_all = axis_all[origin]
         # … and a foot already toes-up (a heel landing) comes down to none at landing no faster
         # either (lifted 15° in the two frames before heel strike, CMU 07_02's foot was laid flat
         # by 41° in one frame; the capture 13°). A toes-down foot (a forefoot landing) keeps its
@@ -490,20 +493,23 @@ def frames_to_contact(swing: np.ndarray, cyclic: bool = False) -> np.ndarray:
 
 
 def rate_limited_envelope(x: np.ndarray, inside: np.ndarray, rate: float, cyclic: bool = False) -> np.ndarray:
-    """The least values ≥ ``x`` that fall by at most ``rate`` per frame within each run of
-    ``inside`` frames (``x`` itself outside them); ``cyclic``: a run across the end goes on at the start.
+    """(the least values ≥ ``x`` that fall by at most ``rate`` per frame within each run of
+    ``inside`` frames, ``x`` itself outside them; per frame, the frame its value comes from).
+    ``cyclic``: a run across the end goes on at the start.
 
-    >>> rate_limited_envelope(np.array([0, 0, 3.0, 0, 0, 0.5]), np.array([0, 1, 1, 1, 1, 0], bool), 1.0)
-    array([0. , 0. , 3. , 2. , 1. , 0.5])
+    >>> y, origin = rate_limited_envelope(np.array([0, 0, 3.0, 0, 0, 0.5]), np.array([0, 1, 1, 1, 1, 0], bool), 1.0)
+    >>> y, origin
+    (array([0. , 0. , 3. , 2. , 1. , 0.5]), array([0, 1, 2, 2, 2, 5]))
     """
-    x = np.asarray(x, float).copy()
+    n = len(x)
     shift = int(np.argmin(inside)) if cyclic and not inside.all() else 0
-    y = np.roll(x, -shift)
+    y = np.roll(np.asarray(x, float), -shift)
     ins = np.roll(inside, -shift)
-    for t in range(1, len(y)):
-        if ins[t] and ins[t - 1]:
-            y[t] = max(y[t], y[t - 1] - rate)
-    return np.roll(y, shift)
+    origin = np.arange(n)
+    for t in range(1, n):
+        if ins[t] and ins[t - 1] and y[t - 1] - rate > y[t]:
+            y[t], origin[t] = y[t - 1] - rate, origin[t - 1]
+    return np.roll(y, shift), np.roll((origin + shift) % n, shift)
 
 
 def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
