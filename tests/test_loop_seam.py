@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from stimuli.motion import quat
-from stimuli.motion.footfix import lift_toes, offsets_of
+from stimuli.motion.footfix import cap_landing_turn, lift_toes, offsets_of
 
 
 def _lift(offsets, ankle_y, floor):
@@ -168,3 +168,17 @@ def test_a_carried_toe_lift_keeps_the_axis_it_had_where_it_was_needed():
     axis = turns[:, 1:] / np.maximum(np.linalg.norm(turns[:, 1:], axis=1, keepdims=True), 1e-12)
     assert np.degrees(quat.angle(turns[3:4]))[0] > 1          # carried into the turned frame …
     assert np.allclose(axis[3], axis[2], atol=1e-9)             # … about the first frame's axis
+
+
+def test_the_landing_cap_holds_for_all_passes_together():
+    """The clean-up lifts again on each of its passes where the clearance is still short: three
+    passes lifted CMU 07_02's toes-up foot 18° in the frames before heel strike, each within its own
+    cap. Against the foot before any lift, the turn comes in and goes out at the rate."""
+    n = 8
+    swing = np.array([False, True, True, True, True, True, True, False])
+    unlifted = np.tile(quat.from_axis_angle(np.array([-np.radians(30.0), 0.0, 0.0])), (n, 1))   # toes up
+    lift = np.radians([0, 0, 0, 0, 18, 18, 18, 0])               # three passes' worth, late in swing
+    feet = quat.mul(quat.from_axis_angle(np.stack([-lift, 0 * lift, 0 * lift], -1)), unlifted)
+    out = cap_landing_turn(feet, unlifted, swing, np.radians(5.0))
+    turn = np.degrees(quat.angle(quat.mul(out, quat.inv(unlifted))))
+    assert turn.round(6).tolist() == [0, 0, 0, 0, 5, 10, 5, 0]   # in at 5° a frame, out by the landing

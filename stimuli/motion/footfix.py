@@ -473,6 +473,32 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     return out
 
 
+def cap_landing_turn(feet: np.ndarray, unlifted: np.ndarray, swing: np.ndarray, rate: float,
+                     cyclic: bool = False) -> np.ndarray:
+    """Foot rotations ``feet`` turned back towards ``unlifted`` where a toes-up swinging foot (a heel
+    landing) is turned from it by more than ``rate`` times the frames left to its landing, or by
+    more than ``rate`` beyond its turn the frame before (the lift comes in no faster either)."""
+    out = feet.copy()
+    toes_up = quat.rotate(unlifted, np.array([0.0, 0.0, 1.0]))[:, 1] > 0
+    landing = rate * frames_to_contact(swing, cyclic)
+    turn = quat.angle(quat.mul(feet, quat.inv(unlifted)))
+    n = len(feet)
+    start = int(np.argmin(swing)) if cyclic and not swing.all() else 0
+    previous = 0.0
+    for k in range(n):
+        t = (start + k) % n
+        if not (swing[t] and toes_up[t]):
+            previous = 0.0
+            continue
+        allowed = min(landing[t], previous + rate)
+        if turn[t] > allowed + 1e-9:
+            out[t] = quat.slerp(unlifted[t][None], feet[t][None], np.array([allowed / turn[t]]))[0]
+            previous = allowed
+        else:
+            previous = turn[t]
+    return out
+
+
 def frames_to_contact(swing: np.ndarray, cyclic: bool = False) -> np.ndarray:
     """Per frame, how many frames on the next frame out of ``swing`` is (0 there; a swing running
     off the end of a clip that does not loop counts to the end).
@@ -556,7 +582,7 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     rot = flatten_feet(motion, rot, root, contacts, cyclic)
     _, src = motion.global_transforms()
     src_len = {s: np.linalg.norm(src[:, roles[f"{s}_ankle"]] - src[:, roles[f"{s}_hip"]], axis=1) for s in SIDES}
-    rolls = {}
+    rolls, unlifted = {}, {}
     for it in range(iterations):
         grot, gpos = motion.global_transforms(rot, root)
         rgrot, rgpos = (grot, gpos) if reference is None or it > 0 else reference.global_transforms()
@@ -597,8 +623,14 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
                 targets[s][free[s]] = follow[free[s]]
             # Never below the ground, in or out of contact; clear it in swing.
             floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(motion.n_frames)
+            rate = np.radians(TOE_LIFT_RATE_DEG_S) / motion.fps
+            unlifted.setdefault(s, feet[s].copy())
             feet[s] = lift_toes(targets[s], feet[s], offsets_of(feet[s], foot_offsets[s]), floor, ~contacts[s],
-                                max_rate=np.radians(TOE_LIFT_RATE_DEG_S) / motion.fps, cyclic=cyclic)
+                                max_rate=rate, cyclic=cyclic)
+            # Each pass lifts again where the clearance is still short: the landing cap holds for
+            # the lifts of all passes together (three passes lifted CMU 07_02's toes-up foot 18°
+            # in the frames before heel strike, each within its own cap).
+            feet[s] = cap_landing_turn(feet[s], unlifted[s], ~contacts[s], rate, cyclic)
             low = offsets_of(feet[s], foot_offsets[s])[:, :, 1].min(axis=1)
             targets[s][:, 1] += np.maximum(0.0, floor - (low + targets[s][:, 1]))
         root = lowered
