@@ -125,9 +125,9 @@ def test_toe_lift_fades_out_after_toe_off_instead_of_ending_in_one_frame():
 
 def test_toe_lift_of_a_heel_landing_comes_down_to_none_at_the_rate_before_it_lands():
     """A foot already toes-up 40° before heel strike, its heel under the swing clearance: turning
-    the toes up further raises that heel, and without a rate the lift was its full amount up to
-    the frame before landing, where the clean-up lays the foot flat (CMU 07_02: 41° in one frame,
-    the capture 13°). With one it is at most the rate times the frames left to the landing."""
+    the toes up further raises that heel, and the lift was its full amount up to the frame before
+    landing, where the clean-up lays the foot flat (CMU 07_02: 41° in one frame, the capture 13°).
+    Capped, it is at most the rate times the frames left to the landing."""
     n = 10
     swing = np.ones(n, bool)
     swing[[0, 9]] = False
@@ -140,13 +140,14 @@ def test_toe_lift_of_a_heel_landing_comes_down_to_none_at_the_rate_before_it_lan
     floor[[7, 8]] = 0.008                                        # 8 mm of clearance wanted late in swing
     rate = np.radians(3.0)
 
-    def lifts(**kw):
-        out = lift_toes(ankle, foot, offsets, floor, swing, **kw)
-        return np.degrees(quat.angle(quat.mul(out, quat.inv(foot))))
+    lifted = lift_toes(ankle, foot, offsets, floor, swing, max_rate=rate)
+    capped = cap_landing_turn(lifted, foot, swing, rate)
 
-    abrupt, capped = lifts(), lifts(max_rate=rate)
-    assert abrupt[8] > 6                                         # a big turn in the last frame of swing
-    assert capped[8] <= 3 + 1e-9 and capped[7] <= 6 + 1e-9 and capped[8] > 0
+    def turns(feet):
+        return np.degrees(quat.angle(quat.mul(feet, quat.inv(foot))))
+
+    assert turns(lifted)[8] > 6                                  # a big turn in the last frame of swing
+    assert turns(capped)[8] <= 3 + 1e-9 and turns(capped)[7] <= 6 + 1e-9 and turns(capped)[8] > 0
 
 
 def test_a_carried_toe_lift_keeps_the_axis_it_had_where_it_was_needed():

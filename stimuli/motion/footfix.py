@@ -415,9 +415,9 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
     walk's last frame before heel strike turned its toes up 15° for 0.06 mm (on 4-cycle loops,
     whose seam then read 1.9–2.2; three women's walks pitched a foot 30–36° in one frame).
     ``max_rate`` (radians per frame): in the first half of each swing the lift then falls no faster
-    than this — it fades out over the frames after the last that needs it instead of ending at once —
-    and a toes-up foot's lift is at most this times the frames left to its landing; ``cyclic``: a
-    swing across the clip's end goes on at its start.
+    than this — it fades out over the frames after the last that needs it instead of ending at once
+    (:func:`cap_landing_turn` limits it before a heel landing); ``cyclic``: a swing across the clip's
+    end goes on at its start.
 
     >>> toe_down = np.array([[[0.0, -0.02, -0.05], [0.0, -0.12, 0.12]]])  # heel, toe tip: toes pointing down
     >>> f = lift_toes(np.array([[0.0, 0.12, 0.0]]), np.array([[1.0, 0, 0, 0]]), toe_down, np.array([0.02]),
@@ -462,12 +462,6 @@ def lift_toes(ankle: np.ndarray, foot: np.ndarray, offsets: np.ndarray, floor: n
         # turns it about its long axis (the hold-out Poser walk: 34.6° in one frame, capture 17°).
         lift, origin = rate_limited_envelope(lift, early_stance(swing, cyclic), max_rate, cyclic)
         axis_all = axis_all[origin]
-        # … and a foot already toes-up (a heel landing) comes down to none at landing no faster
-        # either (lifted 15° in the two frames before heel strike, CMU 07_02's foot was laid flat
-        # by 41° in one frame; the capture 13°). A toes-down foot (a forefoot landing) keeps its
-        # lift, which turns it towards the flat foot it lands as.
-        toes_up = quat.rotate(foot, np.array([0.0, 0.0, 1.0]))[:, 1] > 0
-        lift = np.where(toes_up, np.minimum(lift, max_rate * frames_to_contact(swing, cyclic)), lift)
     turned = np.flatnonzero(lift > 0)
     out[turned] = quat.mul(quat.from_axis_angle(axis_all[turned] * lift[turned, None]), foot[turned])
     return out
@@ -477,7 +471,11 @@ def cap_landing_turn(feet: np.ndarray, unlifted: np.ndarray, swing: np.ndarray, 
                      cyclic: bool = False) -> np.ndarray:
     """Foot rotations ``feet`` turned back towards ``unlifted`` where a toes-up swinging foot (a heel
     landing) is turned from it by more than ``rate`` times the frames left to its landing, or by
-    more than ``rate`` beyond its turn the frame before (the lift comes in no faster either)."""
+    more than ``rate`` beyond its turn the frame before (the lift comes in no faster either).
+
+    Lifted 15° more toes-up in the two frames before heel strike, CMU 07_02's foot was laid flat by
+    41° in one frame (the capture: 13°). A toes-down foot (a forefoot landing) keeps its lift, which
+    turns it towards the flat foot it lands as (capped too, the Bandai dash's landing got worse)."""
     out = feet.copy()
     toes_up = quat.rotate(unlifted, np.array([0.0, 0.0, 1.0]))[:, 1] > 0
     landing = rate * frames_to_contact(swing, cyclic)
