@@ -498,8 +498,8 @@ def cap_landing_turn(feet: np.ndarray, unlifted: np.ndarray, swing: np.ndarray, 
 
 
 def frames_to_contact(swing: np.ndarray, cyclic: bool = False) -> np.ndarray:
-    """Per frame, how many frames on the next frame out of ``swing`` is (0 there; a swing running
-    off the end of a clip that does not loop counts to the end).
+    """Per frame, the number of frames to the next frame out of ``swing`` (0 on such a frame; a
+    swing running off the end of a clip that does not loop counts to one past its last frame).
 
     >>> frames_to_contact(np.array([0, 1, 1, 1, 0, 1], bool)), frames_to_contact(np.array([0, 1, 1, 1, 0, 1], bool), True)
     (array([0, 3, 2, 1, 0, 1]), array([0, 3, 2, 1, 0, 1]))
@@ -516,7 +516,8 @@ def frames_to_contact(swing: np.ndarray, cyclic: bool = False) -> np.ndarray:
     return out
 
 
-def rate_limited_envelope(x: np.ndarray, inside: np.ndarray, rate: float, cyclic: bool = False) -> np.ndarray:
+def rate_limited_envelope(x: np.ndarray, inside: np.ndarray, rate: float,
+                          cyclic: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(the least values ≥ ``x`` that fall by at most ``rate`` per frame within each run of
     ``inside`` frames, ``x`` itself outside them; per frame, the frame its value comes from).
     ``cyclic``: a run across the end goes on at the start.
