@@ -14,7 +14,9 @@ slip (PhysDiff/PHC mm), Penetrate mean/max and Float (mm), the largest knee flex
 knee change between two 30-fps frames of the result and of the loop before retargeting, the largest /
 RMS joint change from the retargeted source, the CPU seconds of retarget + clean-up, and the share of
 the loop's frames with neither foot down by the shared contact model (``contact.foot_contacts`` on
-the capture's own skeleton: what the physics step's gain choice reads); then stops. ``--table2``
+the capture's own skeleton: what the physics step's gain choice reads), and the largest turn of a
+foot between two 30-fps frames, cleaned and retargeted without the clean-up (``dfoot``, ``src``:
+a foot snapping at lift-off or landing); then stops. ``--table2``
 prints issue 20's acceptance table: every capture that loops (its gait as above), on each of
 Table 2's eight bodies (the Exp-1 test actors), against the bounds — Skate ≤ 5 % (HUMOS),
 Penetrate and Float ≤ 10 mm, walk knee-flexion peaks (each leg's largest) inside the CGM2.3
@@ -112,6 +114,18 @@ def _knee_at_30fps(motion) -> tuple[float, float]:
             max(float(k.max()) for k in knees.values()))
 
 
+def _foot_turn_at_30fps(motion) -> float:
+    """Largest turn of either foot (the ankle bone's world rotation) between two 30-fps frames, degrees."""
+    from stimuli.motion import quat
+    from stimuli.motion.skeleton import role_indices
+
+    m30 = motion.resample(30.0)
+    grot, _ = m30.global_transforms()
+    roles = role_indices(m30)
+    return max(float(np.degrees(quat.angle(quat.mul(quat.inv(g[:-1]), g[1:]))).max())
+               for g in (grot[:, roles[f"{s}_ankle"]] for s in "lr"))
+
+
 def cleanup_table(files: list[Path]) -> None:
     """The default clean-up on every capture that loops (walk, or jog for the runs and jogs), onto a
     1.80 m BMI-27 man; a capture that gives no loop (06_10) is looped whole by ``make_loop`` and marked *."""
@@ -125,7 +139,7 @@ def cleanup_table(files: list[Path]) -> None:
 
     body = fit_body("M", 1.80, 27.0)
     print(f"{'capture':58} {'skate%':>6} {'slip':>5} {'pen':>5} {'penmax':>6} {'float':>5} {'knee':>5} {'src':>5} "
-          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7}")
+          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7} {'dfoot':>5} {'src':>5}")
     for path in files:
         gait = capture_gait(path)
         name = _name(path)
@@ -142,10 +156,11 @@ def cleanup_table(files: list[Path]) -> None:
         q = motion_quality(out, body)
         (d_src, k_src), (d_out, k_out) = _knee_at_30fps(loop), _knee_at_30fps(out)
         down = foot_contacts(loop).down
+        foot_out, foot_src = _foot_turn_at_30fps(out), _foot_turn_at_30fps(retarget(loop, body, cleanup=False))
         print(f"{name:58} {q['skate_humos_pct']:6.1f} {q['skate_phc_mm']:5.2f} {q['penetrate_mm']:5.1f} "
               f"{q['penetrate_max_mm']:6.1f} {q['float_mm']:5.1f} {k_out:5.1f} {k_src:5.1f} {d_out:5.1f} {d_src:5.1f} "
               f"{out.metadata['joint_change_max_deg']:6.1f}/{out.metadata['joint_change_rms_deg']:5.1f} {cpu:5.2f} "
-              f"{100 * (~(down['l'] | down['r'])).mean():7.1f}")
+              f"{100 * (~(down['l'] | down['r'])).mean():7.1f} {foot_out:5.1f} {foot_src:5.1f}")
 
 
 def walk_knee_peak_band(k: float = 3.0) -> tuple[float, float]:
