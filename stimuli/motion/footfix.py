@@ -504,16 +504,11 @@ def frames_to_contact(swing: np.ndarray, cyclic: bool = False) -> np.ndarray:
     >>> frames_to_contact(np.array([0, 1, 1, 1, 0, 1], bool)), frames_to_contact(np.array([0, 1, 1, 1, 0, 1], bool), True)
     (array([0, 3, 2, 1, 0, 1]), array([0, 3, 2, 1, 0, 1]))
     """
-    n = len(swing)
-    out = np.zeros(n, int)
-    reps = 2 if cyclic else 1
-    s = np.tile(swing, reps)
-    count = 0
-    for t in range(len(s) - 1, -1, -1):
-        count = count + 1 if s[t] else 0
-        if t < n:
-            out[t] = count
-    return out
+    out = np.zeros(len(swing), int)
+    shift, runs = contact_runs(swing, cyclic)
+    for s, e in runs:
+        out[s:e] = e - np.arange(s, e)
+    return np.roll(out, shift)
 
 
 def rate_limited_envelope(x: np.ndarray, inside: np.ndarray, rate: float,
@@ -582,6 +577,7 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     _, src = motion.global_transforms()
     src_len = {s: np.linalg.norm(src[:, roles[f"{s}_ankle"]] - src[:, roles[f"{s}_hip"]], axis=1) for s in SIDES}
     rolls, unlifted = {}, {}
+    rate = np.radians(TOE_LIFT_RATE_DEG_S) / motion.fps      # the toe lift's, per frame
     for it in range(iterations):
         grot, gpos = motion.global_transforms(rot, root)
         rgrot, rgpos = (grot, gpos) if reference is None or it > 0 else reference.global_transforms()
@@ -622,7 +618,6 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
                 targets[s][free[s]] = follow[free[s]]
             # Never below the ground, in or out of contact; clear it in swing.
             floor = swing_clearance(contacts[s], clearance_m) if cyclic else np.zeros(motion.n_frames)
-            rate = np.radians(TOE_LIFT_RATE_DEG_S) / motion.fps
             unlifted.setdefault(s, feet[s].copy())
             feet[s] = lift_toes(targets[s], feet[s], offsets_of(feet[s], foot_offsets[s]), floor, ~contacts[s],
                                 max_rate=rate, cyclic=cyclic)
