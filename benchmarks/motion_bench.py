@@ -16,7 +16,9 @@ RMS joint change from the retargeted source, the CPU seconds of retarget + clean
 the loop's frames with neither foot down by the shared contact model (``contact.foot_contacts`` on
 the capture's own skeleton: what the physics step's gain choice reads), and the largest turn of a
 foot between two 30-fps frames, cleaned and retargeted without the clean-up (``dfoot``, ``src``:
-a foot snapping at lift-off or landing); then stops. ``--table2``
+a foot snapping at lift-off or landing), and how far a knee bends backwards past straight, cleaned
+and in the loop (``hyper``, ``src``: the unsigned knee figures read a hyperextended knee as flexed);
+then stops. ``--table2``
 prints issue 20's acceptance table: every capture that loops (its gait as above), on each of
 Table 2's eight bodies (the Exp-1 test actors), against the bounds — Skate ≤ 5 % (HUMOS),
 Penetrate and Float ≤ 10 mm, walk knee-flexion peaks (each leg's largest) inside the CGM2.3
@@ -126,6 +128,13 @@ def _foot_turn_at_30fps(motion) -> float:
                for g in (grot[:, roles[f"{s}_ankle"]] for s in "lr"))
 
 
+def _hyperextension(motion) -> float:
+    """How far either knee bends backwards past straight at most, degrees (negative: never straight)."""
+    from stimuli.motion.metrics import signed_knee_angles
+
+    return -min(float(k.min()) for k in signed_knee_angles(motion).values())
+
+
 def cleanup_table(files: list[Path]) -> None:
     """The default clean-up on every capture that loops (walk, or jog for the runs and jogs), onto a
     1.80 m BMI-27 man; a capture that gives no loop (06_10) is looped whole by ``make_loop`` and marked *."""
@@ -139,7 +148,7 @@ def cleanup_table(files: list[Path]) -> None:
 
     body = fit_body("M", 1.80, 27.0)
     print(f"{'capture':58} {'skate%':>6} {'slip':>5} {'pen':>5} {'penmax':>6} {'float':>5} {'knee':>5} {'src':>5} "
-          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7} {'dfoot':>5} {'src':>5}")
+          f"{'dknee':>5} {'src':>5} {'chg max/rms':>12} {'cpu s':>5} {'flight%':>7} {'dfoot':>5} {'src':>5} {'hyper':>5} {'src':>5}")
     for path in files:
         gait = capture_gait(path)
         name = _name(path)
@@ -160,7 +169,8 @@ def cleanup_table(files: list[Path]) -> None:
         print(f"{name:58} {q['skate_humos_pct']:6.1f} {q['skate_phc_mm']:5.2f} {q['penetrate_mm']:5.1f} "
               f"{q['penetrate_max_mm']:6.1f} {q['float_mm']:5.1f} {k_out:5.1f} {k_src:5.1f} {d_out:5.1f} {d_src:5.1f} "
               f"{out.metadata['joint_change_max_deg']:6.1f}/{out.metadata['joint_change_rms_deg']:5.1f} {cpu:5.2f} "
-              f"{100 * (~(down['l'] | down['r'])).mean():7.1f} {foot_out:5.1f} {foot_src:5.1f}")
+              f"{100 * (~(down['l'] | down['r'])).mean():7.1f} {foot_out:5.1f} {foot_src:5.1f} "
+              f"{_hyperextension(out):5.1f} {_hyperextension(loop):5.1f}")
 
 
 def walk_knee_peak_band(k: float = 3.0) -> tuple[float, float]:

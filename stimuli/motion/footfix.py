@@ -206,6 +206,30 @@ def sole_positions(grot: np.ndarray, gpos: np.ndarray, points: list[tuple[int, n
     return np.stack([gpos[:, j] + quat.rotate(grot[:, j], off) for j, off in points], axis=1)
 
 
+# A knee bent more than this (degrees) shows the side it flexes to (see flexion_normal).
+FLEXED_KNEE_DEG = 30.0
+
+
+def flexion_normal(thigh: np.ndarray, bend_normal: np.ndarray, interior: np.ndarray) -> np.ndarray:
+    """The normal of the plane a knee flexes in, in the thigh's frame: the mean, over the frames
+    where the knee is bent more than :data:`FLEXED_KNEE_DEG`, of ``bend_normal`` (T×3, world:
+    hip→ankle × hip→knee) turned into the thigh's frame (``thigh``: its world rotations, T×4);
+    ``interior`` (T, radians) is the angle at the knee. A leg never that bent flexes about its
+    thigh's −x axis (the Anny rig's knees).
+
+    >>> thigh = np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
+    >>> normal = np.array([[0.0, 0.0, 0.3], [0.0, 0.0, -1e-4], [0.0, 0.0, 0.5]])
+    >>> flexion_normal(thigh, normal, np.radians([120.0, 179.9, 100.0])).tolist()
+    [0.0, 0.0, 1.0]
+    >>> flexion_normal(thigh, normal, np.radians([179.0, 179.9, 178.0])).tolist()
+    [-1.0, 0.0, 0.0]
+    """
+    flexed = interior < np.radians(180.0 - FLEXED_KNEE_DEG)
+    total = quat.rotate(quat.inv(thigh[flexed]), bend_normal[flexed]).sum(axis=0)
+    norm = float(np.linalg.norm(total))
+    return total / norm if norm > 1e-9 else np.array([-1.0, 0.0, 0.0])
+
+
 def two_bone_ik(motion: Motion, rot: np.ndarray, root: np.ndarray, side: str, target: np.ndarray,
                 keep_foot: np.ndarray) -> np.ndarray:
     """Rotate hip and knee so the ankle reaches ``target`` (T×3); the foot keeps world rotation ``keep_foot``."""
@@ -230,10 +254,16 @@ def two_bone_ik(motion: Motion, rot: np.ndarray, root: np.ndarray, side: str, ta
     ac_ab_1 = np.arccos(np.clip((lcb**2 - lab**2 - lat**2) / (-2 * lab * lat), -1, 1))
     ba_bc_1 = np.arccos(np.clip((lat**2 - lab**2 - lcb**2) / (-2 * lab * lcb), -1, 1))
     axis0 = np.cross(c - a, b - a)
-    # A straight leg has no bend plane: bend about the thigh's own lateral axis (knees go forward).
-    lateral = quat.rotate(a_gr, np.array([1.0, 0.0, 0.0]))
+    forward = quat.rotate(a_gr, flexion_normal(a_gr, axis0, ba_bc_0))
+    # A straight leg has no bend plane: it bends the way the knee flexes.
     straight = np.linalg.norm(axis0, axis=1) < 1e-6
-    axis0[straight] = -lateral[straight]
+    axis0[straight] = forward[straight]
+    # A knee at or past straight the other way (the Bandai walk's −0.1° at heel strike) that must
+    # bend more bends forward: bent further about its own plane it hyperextended 23–36°.
+    flip = (np.sum(axis0 * forward, axis=1) < 0) & (ba_bc_1 < ba_bc_0)
+    axis0[flip] = -axis0[flip]
+    ac_ab_0[flip] = -ac_ab_0[flip]
+    ba_bc_0[flip] = 2 * np.pi - ba_bc_0[flip]
     axis0 = unit(axis0)
     axis1 = np.cross(c - a, target - a)
     axis1 = np.where(np.linalg.norm(axis1, axis=1, keepdims=True) < 1e-9, axis0, axis1)

@@ -99,6 +99,33 @@ def knee_angles(motion, positions=None) -> dict[str, np.ndarray]:
     return out
 
 
+def signed_knee_angles(motion, positions=None) -> dict[str, np.ndarray]:
+    """Knee flexion (degrees) per side, negative where the knee bends backwards (hyperextension).
+
+    :func:`knee_angles` reads a knee bent 20° backwards as 20° of flexion; here the side comes from
+    the hips' left–right axis (a shank turned back from its thigh, seen from the body's left, is flexion).
+
+    >>> from stimuli.motion.motion import Motion
+    >>> names = ["pelvis", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle"]
+    >>> m = Motion(fps=30.0, joint_names=names, parents=np.array([-1, 0, 1, 2, 0, 4, 5]),
+    ...            offsets=np.zeros((7, 3)), rotations=np.tile([1.0, 0, 0, 0], (1, 7, 1)),
+    ...            root_translation=np.zeros((1, 3)))
+    >>> pos = np.array([[[0, 1, 0], [0.1, 1, 0], [0.1, 0.5, 0], [0.1, 0, -0.1],     # left: ankle behind
+    ...                  [-0.1, 1, 0], [-0.1, 0.5, 0], [-0.1, 0, 0.1]]], float)      # right: ahead
+    >>> {s: round(float(a[0]), 1) for s, a in signed_knee_angles(m, pos).items()}
+    {'l': 11.3, 'r': -11.3}
+    """
+    roles = role_indices(motion)
+    pos = motion.positions() if positions is None else positions
+    left = pos[:, roles["l_hip"]] - pos[:, roles["r_hip"]]
+    out = {}
+    for s, unsigned in knee_angles(motion, pos).items():
+        thigh = pos[:, roles[f"{s}_knee"]] - pos[:, roles[f"{s}_hip"]]
+        shank = pos[:, roles[f"{s}_ankle"]] - pos[:, roles[f"{s}_knee"]]
+        out[s] = np.where(np.sum(np.cross(thigh, shank) * left, axis=1) < 0, -unsigned, unsigned)
+    return out
+
+
 def foot_contacts(sole: dict[str, np.ndarray], height: float = CONTACT_HEIGHT_M) -> dict[str, np.ndarray]:
     """Per foot, frames whose lowest sole point is within ``height`` of the ground."""
     return {s: pts[:, :, 1].min(axis=1) <= height for s, pts in sole.items()}
