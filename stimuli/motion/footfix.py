@@ -212,19 +212,23 @@ FLEXED_KNEE_DEG = 30.0
 
 def flexion_normal(thigh: np.ndarray, bend_normal: np.ndarray, interior: np.ndarray) -> np.ndarray:
     """The normal of the plane a knee flexes in, in the thigh's frame: the mean, over the frames
-    where the knee is bent more than :data:`FLEXED_KNEE_DEG`, of ``bend_normal`` (T×3, world:
-    hip→ankle × hip→knee) turned into the thigh's frame (``thigh``: its world rotations, T×4);
-    ``interior`` (T, radians) is the angle at the knee. A leg never that bent flexes about its
-    thigh's −x axis (the Anny rig's knees).
+    where the knee is bent more than :data:`FLEXED_KNEE_DEG` (over all frames if it never is), of
+    ``bend_normal`` (T×3, world: hip→ankle × hip→knee, its length grows with the bend) turned into
+    the thigh's frame (``thigh``: its world rotations, T×4); ``interior`` (T, radians) is the angle
+    at the knee. A leg straight in every frame flexes about its thigh's −x axis (the Anny rig's knees).
 
     >>> thigh = np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
-    >>> normal = np.array([[0.0, 0.0, 0.3], [0.0, 0.0, -1e-4], [0.0, 0.0, 0.5]])
-    >>> flexion_normal(thigh, normal, np.radians([120.0, 179.9, 100.0])).tolist()
+    >>> normal = np.array([[0.0, 0.0, -0.3], [0.0, 0.0, -1e-4], [0.0, 0.0, 0.5]])
+    >>> flexion_normal(thigh, normal, np.radians([179.0, 179.9, 100.0])).tolist()   # the bent frame
     [0.0, 0.0, 1.0]
-    >>> flexion_normal(thigh, normal, np.radians([179.0, 179.9, 178.0])).tolist()
+    >>> flexion_normal(thigh, normal, np.radians([170.0, 179.9, 160.0])).tolist()   # never bent 30°
+    [0.0, 0.0, 1.0]
+    >>> flexion_normal(thigh, 0.0 * normal, np.radians([180.0, 180.0, 180.0])).tolist()
     [-1.0, 0.0, 0.0]
     """
     flexed = interior < np.radians(180.0 - FLEXED_KNEE_DEG)
+    if not flexed.any():
+        flexed[:] = True
     total = quat.rotate(quat.inv(thigh[flexed]), bend_normal[flexed]).sum(axis=0)
     norm = float(np.linalg.norm(total))
     return total / norm if norm > 1e-9 else np.array([-1.0, 0.0, 0.0])
