@@ -58,6 +58,8 @@ def test_walk_has_double_support_and_jog_has_flight(motions):
         assert 55 < w["stance_pct"] < 70 and 30 < j["stance_pct"] < 50
         # Jogging bends the knees more than walking (Novacheck 1998).
         assert j["knee_flexion_max_deg"] > w["knee_flexion_max_deg"] + 10
+        # No knee bends backwards, or even straightens (the generated walk keeps 12° or more).
+        assert w["knee_hyperextension_deg"] < 0 and j["knee_hyperextension_deg"] < 0, (w, j)
 
 
 def test_generated_jog_knee_runs(motions):

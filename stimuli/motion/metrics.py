@@ -133,7 +133,8 @@ def foot_contacts(sole: dict[str, np.ndarray], height: float = CONTACT_HEIGHT_M)
 
 def gait_metrics(motion, points: dict | None = None) -> dict:
     """Cadence (steps/min), speed (m/s), step length (m), walking base (m), stance/double-support/
-    flight (%), cycles, knee flexion range (°)."""
+    flight (%), cycles, knee flexion range and maximum (°), and how far a knee bends backwards past
+    straight at most (°, negative: never straight; :func:`signed_knee_angles`)."""
     rep, k = _periodic(motion)
     ev = gait_events(rep)
     # Strides of the same foot (two steps each): robust to left/right step asymmetry.
@@ -168,7 +169,8 @@ def gait_metrics(motion, points: dict | None = None) -> dict:
             "walking_base_m": base, "stance_pct": float(stance), "double_support_pct": both,
             "flight_pct": none, "stance_height_cm": 100.0 * float(np.mean(list(level.values()))),
             "cycles": int(cycles), "knee_flexion_range_deg": knee_range,
-            "knee_flexion_max_deg": float(max(knees["l"].max(), knees["r"].max()))}
+            "knee_flexion_max_deg": float(max(knees["l"].max(), knees["r"].max())),
+            "knee_hyperextension_deg": float(-min(k.min() for k in signed_knee_angles(rep, gpos).values()))}
 
 
 def stance_level(low: np.ndarray, heel_strikes: np.ndarray, toe_offs: np.ndarray) -> float:
