@@ -315,21 +315,23 @@ def test_leg_ik_bends_a_straight_or_hyperextended_knee_forward():
     names, parents, offsets = canonical_skeleton(1.75)
     knee, ankle = names.index("l_knee"), names.index("l_ankle")
     # Knee rotation per frame; the rest pose has 2.5° of flexion, so −4° is 1.5° past straight.
-    start = np.radians([-4.0, 20.0, -4.0, -8.0, 30.0])
+    start = np.radians([-4.0, 20.0, -4.0, -8.0, 30.0, -8.0])
     rot = np.tile([1.0, 0, 0, 0], (len(start), len(names), 1))
     rot[:, knee] = quat.from_axis_angle(start[:, None] * [1.0, 0.0, 0.0])
     m = Motion(30.0, names, parents, offsets, rot, np.zeros((len(start), 3)) + [0, 1, 0], {"source": "test"})
     grot, gpos = m.global_transforms()
     hip = gpos[:, names.index("l_hip")]
     ankle_pos = gpos[:, ankle]
-    # Pull the ankle 3 cm towards the hip, except in frame 3 (5.5° past straight), pushed 1 mm away.
-    pull = np.array([0.03, 0.03, 0.03, -0.001, 0.03])
+    # Pull the ankle 3 cm towards the hip, except in frame 3 (5.5° past straight), pushed 1 mm away,
+    # and frame 5 (the same), left where it is.
+    pull = np.array([0.03, 0.03, 0.03, -0.001, 0.03, 0.0])
     target = ankle_pos + pull[:, None] * (hip - ankle_pos) / np.linalg.norm(hip - ankle_pos, axis=1, keepdims=True)
     out = m.replace(rotations=two_bone_ik(m, rot, m.root_translation, "l", target, grot[:, ankle]))
     reached = out.positions()[:, ankle]
-    assert np.abs(reached[[0, 1, 2, 4]] - target[[0, 1, 2, 4]]).max() < 1e-6
+    assert np.abs(reached[[0, 1, 2, 4, 5]] - target[[0, 1, 2, 4, 5]]).max() < 1e-6
     before, after = signed_knee_angles(m)["l"], signed_knee_angles(out)["l"]
-    assert (before[[0, 2, 3]] < 0).all(), before
+    assert (before[[0, 2, 3, 5]] < 0).all(), before
     assert (after[[0, 2]] > 10.0).all(), after                    # hyperextended, bent more: forward
     assert after[1] > before[1] and after[4] > before[4]         # bent knees bend further forward
     assert before[3] <= after[3] <= 0.0                          # straightening keeps its side
+    assert after[5] == pytest.approx(before[5], abs=1e-6)         # left alone, as it was

@@ -264,7 +264,8 @@ def two_bone_ik(motion: Motion, rot: np.ndarray, root: np.ndarray, side: str, ta
     axis0[straight] = forward[straight]
     # A knee at or past straight the other way (the Bandai walk's −0.1° at heel strike) that must
     # bend more bends forward: bent further about its own plane it hyperextended 23–36°.
-    flip = (np.sum(axis0 * forward, axis=1) < 0) & (ba_bc_1 < ba_bc_0)
+    # (More by a margin above rounding: a target at the ankle itself must not flip a knee.)
+    flip = (np.sum(axis0 * forward, axis=1) < 0) & (ba_bc_1 < ba_bc_0 - 1e-6)
     axis0[flip] = -axis0[flip]
     ac_ab_0[flip] = -ac_ab_0[flip]
     ba_bc_0[flip] = 2 * np.pi - ba_bc_0[flip]
