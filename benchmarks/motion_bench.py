@@ -24,7 +24,8 @@ Table 2's eight bodies (the Exp-1 test actors), against the bounds — Skate ≤
 Penetrate and Float ≤ 10 mm, walk knee-flexion peaks (each leg's largest) inside the CGM2.3
 normative walk's peak mean ± 3 SD, no T-pose frame (arm abduction under the import's 30°), loop
 seam no larger than the clip's own frame-to-frame change (``seam_error``: the seam's acceleration
-and its step, each over the clip's own 99th percentile, ≤ 1) — with the
+and its step, each over the clip's own 99th percentile, ≤ 1), knees bent backwards past straight
+no further than the loop's own (or straight) + 2° (``hyper``) — with the
 joint change from the retargeted source and the CPU seconds of import + loop + retarget per
 capture (bound: 2 s); then the worst per file and the refusal of a capture that gives no loop.
 Numbers only, no assertions.
@@ -193,6 +194,7 @@ def _table2_rows(loop, bodies, gait, band) -> list[dict]:
     from stimuli.motion.retarget import retarget
 
     arms = float(arm_abduction(loop).max())
+    hyper_bound = max(_hyperextension(loop), 0.0) + 2.0
     rows = []
     for body in bodies:
         t0 = time.process_time()
@@ -205,10 +207,12 @@ def _table2_rows(loop, bodies, gait, band) -> list[dict]:
         fails = [name for name, bad in (
             ("skate", q["skate_humos_pct"] > 5.0), ("pen", q["penetrate_mm"] > 10.0), ("float", q["float_mm"] > 10.0),
             ("knee", gait == "walk" and not all(band[0] <= k <= band[1] for k in peaks)),
-            ("tpose", arms >= EASE_IN_MIN_DEG), ("seam", max(seam["ratio"], jump) > 1.0)) if bad]
+            ("tpose", arms >= EASE_IN_MIN_DEG), ("seam", max(seam["ratio"], jump) > 1.0),
+            ("hyper", _hyperextension(out) > hyper_bound)) if bad]
         rows.append({"body": body.body_id, "skate": q["skate_humos_pct"], "pen": q["penetrate_mm"],
                      "penmax": q["penetrate_max_mm"], "float": q["float_mm"], "knee_lo": min(peaks),
-                     "knee_hi": max(peaks), "arms": arms, "seam": seam["ratio"], "jump": jump, "chg_max": out.metadata["joint_change_max_deg"],
+                     "knee_hi": max(peaks), "hyper": _hyperextension(out), "arms": arms, "seam": seam["ratio"], "jump": jump,
+                     "chg_max": out.metadata["joint_change_max_deg"],
                      "chg_rms": out.metadata["joint_change_rms_deg"], "cpu": cpu, "fails": fails})
     return rows
 
@@ -225,8 +229,9 @@ def table2(files: list[Path]) -> None:
     bodies = [body_for_actor(a) for a in proto.actors if not getattr(a, "practice_only", False)]
     band = walk_knee_peak_band()
     print(f"Table 2's {len(bodies)} bodies; walk knee peak band (CGM2.3 mean ± 3 SD) {band[0]:.1f}–{band[1]:.1f}°; "
-          "bounds: skate ≤ 5 %, pen/float ≤ 10 mm, arms < 30°, seam and jump ratios ≤ 1, import+loop+retarget ≤ 2 CPU s")
-    head = (f"{'capture':52} {'body':7} {'skate%':>6} {'pen':>4} {'max':>4} {'float':>5} {'knee pk':>11} {'arms':>4} "
+          "bounds: skate ≤ 5 %, pen/float ≤ 10 mm, arms < 30°, seam and jump ratios ≤ 1, knees bent backwards no more "
+          "than the loop's own (or straight) + 2°, import+loop+retarget ≤ 2 CPU s")
+    head = (f"{'capture':52} {'body':7} {'skate%':>6} {'pen':>4} {'max':>4} {'float':>5} {'knee pk':>11} {'hyper':>5} {'arms':>4} "
             f"{'seam':>4} {'jump':>4} {'chg max/rms':>11} {'cpu s':>5}  fails")
     print(head)
     worst = []
@@ -243,13 +248,14 @@ def table2(files: list[Path]) -> None:
         rows = _table2_rows(loop, bodies, gait, band)
         for r in rows:
             print(f"{name:52} {r['body']:7} {r['skate']:6.1f} {r['pen']:4.1f} {r['penmax']:4.1f} {r['float']:5.1f} "
-                  f"{r['knee_lo']:5.1f}-{r['knee_hi']:5.1f} {r['arms']:4.0f} {r['seam']:4.2f} {r['jump']:4.2f} "
+                  f"{r['knee_lo']:5.1f}-{r['knee_hi']:5.1f} {r['hyper']:5.1f} {r['arms']:4.0f} {r['seam']:4.2f} {r['jump']:4.2f} "
                   f"{r['chg_max']:5.1f}/{r['chg_rms']:5.1f} {base_cpu + r['cpu']:5.2f}  {' '.join(r['fails']) or 'ok'}")
         fails = sorted({f for r in rows for f in r["fails"]})
         worst.append(
             f"{name:52} {gait:4} skate ≤{max(r['skate'] for r in rows):4.1f} % pen ≤{max(r['pen'] for r in rows):4.1f} "
             f"(deepest {max(r['penmax'] for r in rows):4.1f}) float ≤{max(r['float'] for r in rows):4.1f} mm "
             f"knee {min(r['knee_lo'] for r in rows):5.1f}-{max(r['knee_hi'] for r in rows):5.1f}° "
+            f"hyper ≤{max(r['hyper'] for r in rows):5.1f}° "
             f"arms {rows[0]['arms']:3.0f}° seam ≤{max(r['seam'] for r in rows):4.2f} jump ≤{max(r['jump'] for r in rows):4.2f} "
             f"chg ≤{max(r['chg_max'] for r in rows):5.1f}/{max(r['chg_rms'] for r in rows):4.1f}° "
             f"cpu ≤{base_cpu + max(r['cpu'] for r in rows):4.2f} s  {'FAILS ' + ' '.join(fails) if fails else 'all met'}")
