@@ -129,16 +129,10 @@ def _foot_turn_at_30fps(motion) -> float:
                for g in (grot[:, roles[f"{s}_ankle"]] for s in "lr"))
 
 
-def _hyperextension(motion) -> float:
-    """How far either knee bends backwards past straight at most, degrees (negative: never straight)."""
-    from stimuli.motion.metrics import signed_knee_angles
-
-    return -min(float(k.min()) for k in signed_knee_angles(motion).values())
-
-
 def cleanup_table(files: list[Path]) -> None:
     """The default clean-up on every capture that loops (walk, or jog for the runs and jogs), onto a
     1.80 m BMI-27 man; a capture that gives no loop (06_10) is looped whole by ``make_loop`` and marked *."""
+    from stimuli.motion.metrics import knee_hyperextension
     from stimuli.bodies import fit_body
     from stimuli.errors import StimuliError
     from stimuli.motion.bvh import read_bvh
@@ -171,7 +165,7 @@ def cleanup_table(files: list[Path]) -> None:
               f"{q['penetrate_max_mm']:6.1f} {q['float_mm']:5.1f} {k_out:5.1f} {k_src:5.1f} {d_out:5.1f} {d_src:5.1f} "
               f"{out.metadata['joint_change_max_deg']:6.1f}/{out.metadata['joint_change_rms_deg']:5.1f} {cpu:5.2f} "
               f"{100 * (~(down['l'] | down['r'])).mean():7.1f} {foot_out:5.1f} {foot_src:5.1f} "
-              f"{_hyperextension(out):5.1f} {_hyperextension(loop):5.1f}")
+              f"{knee_hyperextension(out):5.1f} {knee_hyperextension(loop):5.1f}")
 
 
 def walk_knee_peak_band(k: float = 3.0) -> tuple[float, float]:
@@ -189,12 +183,12 @@ def _table2_rows(loop, bodies, gait, band) -> list[dict]:
     """One row per body: the acceptance figures of ``loop`` retargeted onto it."""
     from stimuli.motion.bvh import EASE_IN_MIN_DEG, arm_abduction
     from stimuli.motion.loop import seam_error
-    from stimuli.motion.metrics import knee_angles
+    from stimuli.motion.metrics import knee_angles, knee_hyperextension
     from stimuli.motion.quality import motion_quality
     from stimuli.motion.retarget import retarget
 
     arms = float(arm_abduction(loop).max())
-    hyper_bound = max(_hyperextension(loop), 0.0) + 2.0
+    hyper_bound = max(knee_hyperextension(loop), 0.0) + 2.0
     rows = []
     for body in bodies:
         t0 = time.process_time()
@@ -204,14 +198,15 @@ def _table2_rows(loop, bodies, gait, band) -> list[dict]:
         peaks = [float(k.max()) for k in knee_angles(out.resample(30.0)).values()]
         seam = seam_error(out)
         jump = seam["seam_step_m"] / max(seam["interior_step_p99_m"], 1e-12)
+        hyper = knee_hyperextension(out)
         fails = [name for name, bad in (
             ("skate", q["skate_humos_pct"] > 5.0), ("pen", q["penetrate_mm"] > 10.0), ("float", q["float_mm"] > 10.0),
             ("knee", gait == "walk" and not all(band[0] <= k <= band[1] for k in peaks)),
             ("tpose", arms >= EASE_IN_MIN_DEG), ("seam", max(seam["ratio"], jump) > 1.0),
-            ("hyper", _hyperextension(out) > hyper_bound)) if bad]
+            ("hyper", hyper > hyper_bound)) if bad]
         rows.append({"body": body.body_id, "skate": q["skate_humos_pct"], "pen": q["penetrate_mm"],
                      "penmax": q["penetrate_max_mm"], "float": q["float_mm"], "knee_lo": min(peaks),
-                     "knee_hi": max(peaks), "hyper": _hyperextension(out), "arms": arms, "seam": seam["ratio"], "jump": jump,
+                     "knee_hi": max(peaks), "hyper": hyper, "arms": arms, "seam": seam["ratio"], "jump": jump,
                      "chg_max": out.metadata["joint_change_max_deg"],
                      "chg_rms": out.metadata["joint_change_rms_deg"], "cpu": cpu, "fails": fails})
     return rows

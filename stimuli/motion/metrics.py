@@ -126,6 +126,12 @@ def signed_knee_angles(motion, positions=None) -> dict[str, np.ndarray]:
     return out
 
 
+def knee_hyperextension(motion, positions=None) -> float:
+    """How far (degrees) either knee bends backwards past straight at most; negative: never straight
+    (the least flexion of :func:`signed_knee_angles`, sign turned)."""
+    return -min(float(k.min()) for k in signed_knee_angles(motion, positions).values())
+
+
 def foot_contacts(sole: dict[str, np.ndarray], height: float = CONTACT_HEIGHT_M) -> dict[str, np.ndarray]:
     """Per foot, frames whose lowest sole point is within ``height`` of the ground."""
     return {s: pts[:, :, 1].min(axis=1) <= height for s, pts in sole.items()}
@@ -170,7 +176,7 @@ def gait_metrics(motion, points: dict | None = None) -> dict:
             "flight_pct": none, "stance_height_cm": 100.0 * float(np.mean(list(level.values()))),
             "cycles": int(cycles), "knee_flexion_range_deg": knee_range,
             "knee_flexion_max_deg": float(max(knees["l"].max(), knees["r"].max())),
-            "knee_hyperextension_deg": float(-min(k.min() for k in signed_knee_angles(rep, gpos).values()))}
+            "knee_hyperextension_deg": knee_hyperextension(rep, gpos)}
 
 
 def stance_level(low: np.ndarray, heel_strikes: np.ndarray, toe_offs: np.ndarray) -> float:
