@@ -577,3 +577,43 @@ def test_protocol_step_checks_every_reference_body_before_writing(protocol_path,
         with pytest.raises(StimuliError, match=message) as err:
             run_protocol(protocol_path("exp2_com_vs_average"), tmp_path / f"out_{name}", motions_dir=folder)
         assert "F_jog.npz" in str(err.value) and not (tmp_path / f"out_{name}").exists()
+
+
+def test_clip_warnings_hold_each_clip_to_the_bound_around_its_reference():
+    """A walk may fly 3 points more than its reference, a jog 5 points either way; tracking 3° / 4°.
+    (An absolute 10 % threshold let CMU 07_12's 9.4 % against its reference's 0 pass unremarked.)"""
+    from stimuli.physics.checks import flight_warning, result_warnings, tracking_warning
+    from stimuli.physics.protocol_step import clip_warnings
+
+    walk = {"flight_fraction": 0.094, "reference_flight_fraction": 0.0, "flight_fraction_contact_model": 0.0,
+            "tracking_rms_deg_overall": 2.75}
+    line = flight_warning(walk, "walk")
+    assert "9.4 %" in line and "against 0.0 %" in line and "contact model" in line and "it hops" in line
+    assert flight_warning(dict(walk, flight_fraction=0.03), "walk") is None            # exactly on the bound
+    assert flight_warning(dict(walk, reference_flight_fraction=0.07), "walk") is None   # 131_02-like reference
+    jog = {"flight_fraction": 0.20, "reference_flight_fraction": 0.26, "tracking_rms_deg_overall": 3.5}
+    assert "within 5 points" in flight_warning(jog, "jog")          # too little flight is off the bound too
+    assert flight_warning(dict(jog, flight_fraction=0.30), "run") is None
+    assert tracking_warning(jog, "jog") is None and "above 3°" in tracking_warning(jog, "walk")
+    assert result_warnings({"tracking_rms_deg_overall": 1.0}, "walk") == []               # no flight figure
+    reports = [dict(walk, actor="F_Lo1", gait="walk"), dict(jog, actor="M_Hi1", gait="jog", fell=True)]
+    assert [w.split(":")[0] for w in clip_warnings(reports)] == ["COM_F_Lo1_walk"]
+
+
+def test_cli_retarget_with_the_feedforward_controller_chooses_gains_on_the_motions_own_body(run_cli, walk, tmp_path):
+    """`physics retarget --controller feedforward` runs what `physics protocol --controller feedforward` runs
+    for one actor: gains chosen on the motion's own body, then the PD + inverse dynamics on the target."""
+    m = walk.replace()
+    m.metadata.update(height_m=1.61, bmi=22.0, sex="F")
+    m.save(tmp_path / "walk.npz")
+    code, out, err = run_cli("physics", "retarget", "--motion", tmp_path / "walk.npz", "--sex", "F", "--height", "1.61",
+                             "--weight", "75", "--controller", "feedforward", "--out", tmp_path / "com.npz",
+                             "--report", tmp_path / "r.json")
+    assert code == 0, err
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["controller"]["feedforward"] and report["controller"]["swing_placement"]
+    choice = report["gain_choice"]
+    assert choice["met"] and choice["scale"] == choice["history"][-1]["scale"]      # the stiffest scale that meets
+    assert "gain choice: walk: gains × 1:" in err and f"× {choice['scale']:g}, feed-forward" in out
+    assert f"no foot down {100 * report['flight_fraction']:.1f} % (reference 0.0 %)" in out
+    assert report["flight_fraction"] <= 0.03 and "warning" not in err, err   # a generated walk keeps a foot down

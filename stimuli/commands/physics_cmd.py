@@ -35,6 +35,10 @@ def register(subparsers) -> None:
                         "body shape it can (default: exit 2)")
     r.add_argument("--gait", choices=("walk", "jog"), default=None,
                    help="which gain set drives the ragdoll (default: the motion's metadata 'gait', else walk)")
+    r.add_argument("--controller", choices=CONTROLLERS, default="pd",
+                   help="pd: the paper's PD with the gait's shipped gains (default); feedforward: PD plus the inverse "
+                        "dynamics of MOTION on its own body, the gains chosen first on that body (as `physics protocol "
+                        "--controller feedforward` does)")
     r.add_argument("--out", type=output_path, required=True, help="COM motion .npz to write")
     r.add_argument("--report", type=Path, default=None, help="report JSON to write")
     r.set_defaults(func=run_retarget)
@@ -65,10 +69,6 @@ def register(subparsers) -> None:
 
 # The protocol step's controllers (docs/readme_physics.md, Controller variants).
 CONTROLLERS = ("pd", "feedforward")
-
-# Tracking looser than the acceptance bound of the reference body (3°) is worth a word.
-TRACKING_WARN_DEG = 3.0
-
 
 def _check_retarget_options(args: argparse.Namespace) -> None:
     """Heights in range and both output files writable, before the (minutes-long) simulation (weights:
@@ -117,10 +117,12 @@ def _reference(args, motion) -> tuple[float, float, str, str]:
 
 def run_retarget(args: argparse.Namespace) -> int:
     from stimuli.motion import Motion
+    from stimuli.physics.checks import result_warnings
     from stimuli.physics.controller import Gains, motion_gait
     from stimuli.physics.inertia import check_weight
     from stimuli.physics.own_body import check_reference
     from stimuli.physics.retarget import RagdollFellError, retarget
+    from stimuli.physics.tune import tune_for_motion
 
     _check_retarget_options(args)
     check_weight(args.weight, args.height, where="--weight")
@@ -136,21 +138,30 @@ def run_retarget(args: argparse.Namespace) -> int:
         gait = args.gait or motion_gait(motion)
     except StimuliError as exc:
         raise StimuliError(f"{args.motion}: metadata gait: {exc}; or choose the gain set with --gait") from None
+    feedforward = args.controller == "feedforward"
     try:
         gains = Gains.load(gait=gait)
-        result = retarget(motion, body, args.weight, reference_body=ref_body, gains=gains, raise_on_fall=True)
+        if feedforward:   # chosen once on the motion's own body, then kept (tune.tune_for_motion)
+            gains = tune_for_motion(motion, ref_body, base=gains,
+                                    progress=lambda line: print(f"gain choice: {line}", file=sys.stderr))
+        result = retarget(motion, body, args.weight, reference_body=ref_body, gains=gains, raise_on_fall=True,
+                          feedforward=feedforward)
     except RagdollFellError as exc:
         if args.report:
             _write_report(args.report, exc.result.report)
         raise StimuliError(f"{args.motion}: {exc}" + (f" (report: {args.report})" if args.report else "")) from None
+    rep = result.report
+    if feedforward:
+        rep["gain_choice"] = {k: gains.tuning[k] for k in ("scale", "met", "history")}
     result.motion.save(args.out)
     if args.report:
-        _write_report(args.report, result.report)
-    rep = result.report
-    print(f"{args.out}: COM motion ({gains.gait} gains), b = {rep['b_m'] * 1000:.2f} mm, tracking RMS "
-          f"{rep['tracking_rms_deg_overall']:.2f}°, vs NoCOM {rep['nocom_rms_deg_mean']:.2f}°, "
+        _write_report(args.report, rep)
+    scale = f" × {gains.tuning['scale']:g}, feed-forward" if feedforward else ""
+    print(f"{args.out}: COM motion ({gains.gait} gains{scale}), b = {rep['b_m'] * 1000:.2f} mm, tracking RMS "
+          f"{rep['tracking_rms_deg_overall']:.2f}°, vs NoCOM {rep['nocom_rms_deg_mean']:.2f}°, no foot down "
+          f"{100 * rep['flight_fraction']:.1f} % (reference {100 * rep['reference_flight_fraction']:.1f} %), "
           f"wall/simulated {rep['wall_per_simulated']:.2f}")
-    for line in _result_notes(rep, gains.gait):
+    for line in result_warnings(rep, gains.gait):
         print(f"warning: {line}", file=sys.stderr)
     return 0
 
@@ -192,20 +203,6 @@ def _motion_notes(args, motion) -> list[str]:
     if args.gait is None and not motion.metadata.get("gait"):
         notes.append(f"{args.motion} records no gait: it is driven with the walking gains; give --gait jog for a "
                      "run or jog")
-    return notes
-
-
-def _result_notes(rep: dict, gait: str) -> list[str]:
-    """Warnings about a finished simulation: a hopping walk (as `physics protocol` gives) or loose tracking."""
-    from stimuli.physics.protocol_step import WALK_FLIGHT_WARN, hop_text
-
-    notes = []
-    if gait == "walk" and (rep.get("flight_fraction") or 0) > WALK_FLIGHT_WARN:
-        notes.append(hop_text(rep["flight_fraction"]))
-    if rep["tracking_rms_deg_overall"] > TRACKING_WARN_DEG:
-        notes.append(f"tracking RMS {rep['tracking_rms_deg_overall']:.2f}° is above {TRACKING_WARN_DEG:g}° (the "
-                     "reference body's bound): the ragdoll follows this motion loosely — check the gait's gain set "
-                     "and the report's per-joint tracking_rms_deg")
     return notes
 
 

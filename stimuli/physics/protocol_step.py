@@ -29,6 +29,7 @@ import numpy as np
 
 from stimuli.errors import StimuliError
 from stimuli.fileio import atomic_write_text, source_digest
+from stimuli.physics.checks import result_warnings
 from stimuli.workers import process_pool
 
 
@@ -333,28 +334,18 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     if fell:
         raise StimuliError(f"{protocol_path}: the ragdoll fell for {len(fell)} COM motion(s): " + "; ".join(fell)
                            + f". Reports are in {out / 'reports'}")
-    return {"reports": reports, "figures": figures, "warnings": notes + hop_warnings(reports)}
+    return {"reports": reports, "figures": figures, "warnings": notes + clip_warnings(reports)}
 
 
-# A walk always has a foot on the floor; a simulated walk above this share of airborne steps hops
-# visibly (the generator's averages stay at 0–3 %, the bundled CMU walk reaches 9–15 %).
-WALK_FLIGHT_WARN = 0.1
+def clip_warnings(reports: list[dict]) -> list[str]:
+    """One line per warning about a simulated clip (:func:`stimuli.physics.checks.result_warnings`).
 
-
-def hop_warnings(reports: list[dict]) -> list[str]:
-    """One line per simulated walk with more than :data:`WALK_FLIGHT_WARN` of its steps airborne.
-
-    >>> hop_warnings([{"actor": "F_Hi1", "gait": "walk", "flight_fraction": 0.24}])
-    ['COM_F_Hi1_walk: no foot on the floor for 24 % of the walk (it hops); see docs/readme_physics.md, Known limits']
+    >>> clip_warnings([{"actor": "F_Hi1", "gait": "walk", "flight_fraction": 0.24, "reference_flight_fraction": 0.0,
+    ...                 "tracking_rms_deg_overall": 1.5}])[0][:57]
+    'COM_F_Hi1_walk: no foot on the floor for 24.0 % of the wa'
     """
-    return [f"COM_{r['actor']}_{r['gait']}: {hop_text(r['flight_fraction'])}" for r in reports
-            if r.get("gait") == "walk" and (r.get("flight_fraction") or 0) > WALK_FLIGHT_WARN]
-
-
-def hop_text(flight_fraction: float) -> str:
-    """What a hopping simulated walk is told: its share of steps with no foot on the floor."""
-    return (f"no foot on the floor for {100 * flight_fraction:.0f} % of the walk (it hops); see "
-            "docs/readme_physics.md, Known limits")
+    return [f"COM_{r['actor']}_{r['gait']}: {line}" for r in reports if not r.get("fell")
+            for line in result_warnings(r, r["gait"])]
 
 
 def _figures(protocol, reports: list[dict], out: Path, plot) -> list[Path]:

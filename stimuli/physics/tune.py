@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from stimuli.physics.checks import TRACKING_BOUND_DEG, flight_excess
 from stimuli.physics.controller import GAINS_FILE, GAITS, Gains, gait_key, inertia_profile, save_gains, set_joint_gains
 from stimuli.physics.ragdoll import build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
@@ -167,10 +168,6 @@ def tune_gaits(gaits=GAITS, target_rms_deg: float = TARGET_RMS_DEG, out: Path | 
 # s, k_d × √s: the same damping ratio), the one that best meets the flight and tracking bounds on
 # the motion's own reference body; then fixed for every target body of that motion.
 MOTION_GAIN_SCALES = (1.0, 0.71, 0.5, 0.35, 0.25)
-# Acceptance bounds per gait: simulated flight share at most the reference's + (walk) or within
-# (jog) this many points, and tracking RMS (degrees).
-FLIGHT_BOUND = {"walk": 0.03, "jog": 0.05}
-TRACKING_BOUND_DEG = {"walk": 3.0, "jog": 4.0}
 
 
 def motion_gain_score(gait: str, flight: float, reference_flight: float, rms_deg: float) -> float:
@@ -179,26 +176,26 @@ def motion_gain_score(gait: str, flight: float, reference_flight: float, rms_deg
     >>> motion_gain_score("walk", 0.02, 0.0, 2.0), round(motion_gain_score("walk", 0.10, 0.0, 3.5), 2)
     (0.0, 7.5)
     """
-    excess = flight - reference_flight if gait == "walk" else abs(flight - reference_flight)
-    return 100 * max(0.0, excess - FLIGHT_BOUND[gait]) + max(0.0, rms_deg - TRACKING_BOUND_DEG[gait])
+    return 100 * flight_excess(gait, flight, reference_flight) + max(0.0, rms_deg - TRACKING_BOUND_DEG[gait])
 
 
 def tune_for_motion(motion, reference_body, feedforward: bool = True, scales=MOTION_GAIN_SCALES,
-                    progress=print) -> Gains:
+                    progress=print, base: Gains | None = None) -> Gains:
     """The gains of one reference motion, chosen on its reference body and then kept for every body.
 
     Runs the motion on ``reference_body`` at each gain scale of its gait's set (:data:`MOTION_GAIN_SCALES`)
     and keeps the stiffest scale that meets the bounds (:func:`motion_gain_score` = 0), else the
     one that misses them least. The returned :class:`Gains` (history in ``tuning``) is passed as
-    ``gains=`` to :func:`stimuli.physics.retarget.retarget` for every target body.
+    ``gains=`` to :func:`stimuli.physics.retarget.retarget` for every target body. ``base``: the
+    gain set to scale (default: the shipped set of the motion's gait).
     """
     import dataclasses
 
     from stimuli.physics.controller import motion_gait
     from stimuli.physics.retarget import retarget
 
-    gait = motion_gait(motion)
-    base = Gains.load(gait=gait)
+    base = Gains.load(gait=motion_gait(motion)) if base is None else base
+    gait = base.gait
     history = []
     for scale in scales:
         gains = dataclasses.replace(base, k_p=base.k_p * scale, k_d=base.k_d * np.sqrt(scale))
