@@ -593,6 +593,8 @@ def test_clip_warnings_hold_each_clip_to_the_bound_around_its_reference():
     assert flight_warning(dict(walk, reference_flight_fraction=0.07), "walk") is None   # 131_02-like reference
     jog = {"flight_fraction": 0.20, "reference_flight_fraction": 0.26, "tracking_rms_deg_overall": 3.5}
     assert "within 5 points" in flight_warning(jog, "jog")          # too little flight is off the bound too
+    assert "--controller feedforward" in flight_warning(dict(jog, controller={"feedforward": False}), "jog")
+    assert "--controller" not in flight_warning(dict(jog, controller={"feedforward": True}), "jog")
     assert flight_warning(dict(jog, flight_fraction=0.30), "run") is None
     assert tracking_warning(jog, "jog") is None and "above 3°" in tracking_warning(jog, "walk")
     assert result_warnings({"tracking_rms_deg_overall": 1.0}, "walk") == []               # no flight figure

@@ -33,12 +33,12 @@ def flight_warning(report: dict, gait: str) -> str | None:
 
     >>> flight_warning({"flight_fraction": 0.094, "reference_flight_fraction": 0.0,
     ...                 "flight_fraction_contact_model": 0.0}, "walk")
-    'no foot on the floor for 9.4 % of the walk against 0.0 % in its reference (at most 3 points more; the contact model on the simulated motion reads 0.0 %): it hops; see docs/readme_physics.md, Known limits'
+    'no foot on the floor for 9.4 % of the walk against 0.0 % in its reference (the bound: at most 3 points more; the contact model on the simulated motion reads 0.0 %): it hops; see docs/readme_physics.md, Known limits'
     >>> flight_warning({"flight_fraction": 0.02, "reference_flight_fraction": 0.0}, "walk") is None
     True
     >>> flight_warning({"flight_fraction": 0.604, "reference_flight_fraction": 0.283,
-    ...                 "flight_fraction_contact_model": 0.466}, "jog")[:62]
-    'no foot on the floor for 60.4 % of the jog against 28.3 % in it'
+    ...                 "flight_fraction_contact_model": 0.466}, "jog").split(" (")[0]
+    'no foot on the floor for 60.4 % of the jog against 28.3 % in its reference'
     """
     flight = report.get("flight_fraction")
     if flight is None:
@@ -49,11 +49,13 @@ def flight_warning(report: dict, gait: str) -> str | None:
     if _kind(gait) == "walk":
         bound, verdict = f"at most {100 * FLIGHT_BOUND['walk']:.0f} points more", ": it hops"
     else:
-        bound, verdict = f"within {100 * FLIGHT_BOUND['jog']:.0f} points", ""
+        bound, verdict = f"within {100 * FLIGHT_BOUND['jog']:.0f} points of it", ""
     model = report.get("flight_fraction_contact_model")
     read = "" if model is None else f"; the contact model on the simulated motion reads {100 * model:.1f} %"
+    pd_only = "controller" in report and not report["controller"].get("feedforward")
+    hint = "; the PD + feed-forward controller (--controller feedforward) follows flight more closely" if pd_only else ""
     return (f"no foot on the floor for {100 * flight:.1f} % of the {gait} against {100 * reference:.1f} % in its "
-            f"reference ({bound}{read}){verdict}; {SEE}")
+            f"reference (the bound: {bound}{read}){verdict}{hint}; {SEE}")
 
 
 def tracking_warning(report: dict, gait: str) -> str | None:
