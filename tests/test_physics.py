@@ -619,3 +619,23 @@ def test_cli_retarget_with_the_feedforward_controller_chooses_gains_on_the_motio
     assert "gain choice: walk: gains × 1:" in err and f"× {choice['scale']:g}, feed-forward" in out
     assert f"no foot down {100 * report['flight_fraction']:.1f} % (reference 0.0 %)" in out
     assert report["flight_fraction"] <= 0.03 and "warning" not in err, err   # a generated walk keeps a foot down
+
+
+def test_a_60_fps_jog_is_simulated_from_30_fps_and_comes_back_at_60_with_its_contacts():
+    """The COM motion of a 60-fps jog has the jog's 60 fps and frame count, and its simulated foot
+    contacts (a gait with flight carries them per frame) are per frame of that motion too."""
+    from stimuli.bodies import fit_body
+    from stimuli.motion.generate import GaitParams, generate
+    from stimuli.physics import retarget
+    from stimuli.physics.controller import Gains
+
+    jog = generate(GaitParams(gait="jog", cadence_spm=160, speed_mps=2.8), height_m=1.75, fps=60, cycles=1)
+    assert len(jog.metadata["contacts"]["l"]) == jog.n_frames
+    result = retarget(jog, fit_body("M", 1.75, 23.0), gains=Gains.load(gait="jog"))
+    out, report = result.motion, result.report
+    assert (out.fps, out.n_frames) == (60.0, jog.n_frames)
+    assert report["resampled_from_fps"] == 60.0 and abs(report["reference_fps"] - 30.0) < 1.0
+    contacts = {s: np.asarray(out.metadata["contacts"][s], bool) for s in "lr"}
+    assert all(len(c) == out.n_frames for c in contacts.values())
+    airborne = (~contacts["l"] & ~contacts["r"]).mean()
+    assert 0.0 < airborne < 0.5                                     # the jog's flight, shown as simulated

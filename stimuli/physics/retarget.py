@@ -230,17 +230,32 @@ def at_reference_rate(motion):
         return motion, False
     meta = motion.metadata
     if not (meta.get("looped") and meta.get("treadmill")):
-        return motion.resample(REFERENCE_FPS), True
+        low = motion.resample(REFERENCE_FPS)
+        low.metadata.pop("contacts", None)   # per frame of the motion given
+        return low, True
     return on_period(motion, n), True
 
 
 def on_period(motion, n_frames: int):
-    """A treadmill loop sampled at ``n_frames`` frames over its own period (the rate follows)."""
+    """A treadmill loop sampled at ``n_frames`` frames over its own period (the rate follows); its
+    per-frame foot contacts (metadata ``contacts``) are taken from the nearest frame in time.
+
+    >>> from stimuli.motion.generate import GaitParams, generate
+    >>> walk = generate(GaitParams(), 1.75, fps=30, cycles=1)
+    >>> fine = on_period(walk, 2 * walk.n_frames)
+    >>> fine.metadata["contacts"]["l"][::2] == walk.metadata["contacts"]["l"]
+    True
+    """
     from stimuli.motion.loop import sample_periodic
 
     fps = n_frames * motion.fps / motion.n_frames
     rot, root = sample_periodic(motion, np.arange(n_frames) / fps)
-    return motion.replace(fps=float(fps), rotations=rot, root_translation=root)
+    out = motion.replace(fps=float(fps), rotations=rot, root_translation=root)
+    contacts = out.metadata.pop("contacts", None)
+    if contacts and all(len(contacts.get(s, [])) == motion.n_frames for s in ("l", "r")):
+        nearest = np.rint(np.arange(n_frames) * motion.n_frames / n_frames).astype(int) % motion.n_frames
+        out.metadata["contacts"] = {s: [int(contacts[s][i]) for i in nearest] for s in ("l", "r")}
+    return out
 
 
 def loop_input(motion):
