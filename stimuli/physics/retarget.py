@@ -201,10 +201,7 @@ def finely_sampled(motion, fps: float):
     meta = motion.metadata
     if not (meta.get("looped") and meta.get("treadmill")):
         return motion.resample(float(motion.fps * k))
-    from stimuli.motion.loop import sample_periodic
-
-    rot, root = sample_periodic(motion, np.arange(motion.n_frames * k) / (motion.fps * k))
-    return motion.replace(fps=float(motion.fps * k), rotations=rot, root_translation=root)
+    return on_period(motion, motion.n_frames * k)
 
 
 # The highest frame rate the physics takes a reference at. The gains were chosen, and every flight and
