@@ -154,17 +154,22 @@ def test_render_on_a_cluster_equals_local_and_survives_a_killed_worker(short_pro
 
 @pytest.mark.slow
 def test_physics_protocol_on_a_cluster_equals_local_and_survives_a_killed_worker(tmp_path, monkeypatch):
+    from stimuli.bodies.backend import anny_cache_dir, project_cache_root
+
     protocol = _tiny_exp2(tmp_path)
     outs = {}
     with _cluster(tmp_path) as (address, workers):
         for name in ("local", "dask"):   # each its own physics cache (the bodies' is shared), so both simulate
             cache = tmp_path / f"cache_{name}"
             (cache / "physics").mkdir(parents=True)
-            (cache / "bodies").symlink_to(ROOT / ".cache" / "bodies", target_is_directory=True)
+            (cache / "bodies").symlink_to(project_cache_root() / "bodies", target_is_directory=True)
             command = [sys.executable, "-m", "stimuli.cli", "physics", "protocol", str(protocol), "--out",
                        str(tmp_path / name)] + (["--scheduler", address] if name == "dask" else ["--workers", "1"])
-            run = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                   env=dict(os.environ, SHAPEMOTION_CACHE=str(cache)))
+            # Anny's model data (about 0.8 GB) and Warp's kernels stay where they are: rebuilt under each
+            # test cache they cost two minutes and filled a CI disk.
+            env = dict(os.environ, SHAPEMOTION_CACHE=str(cache), ANNY_CACHE_DIR=str(anny_cache_dir()),
+                       WARP_CACHE_PATH=str(project_cache_root() / "warp"))
+            run = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
             try:
                 killed = name == "local" or _kill_once_a_task_runs(workers[0], "shapemotion-physics-", run)
                 outs[name], _ = run.communicate(timeout=240)
