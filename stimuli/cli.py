@@ -102,8 +102,16 @@ def command_overview(subparsers) -> str:
 
 
 def print_user_error(exc: Exception) -> None:
-    """One readable paragraph on stderr; no traceback for a user error."""
-    print(textwrap.fill(f"shapemotion: error: {exc}", width=100, subsequent_indent="  "), file=sys.stderr)
+    """One readable paragraph on stderr; no traceback for a user error.
+
+    On a terminal it is wrapped at 100 columns, between words only, so a long path stays whole. In a
+    log or a pipe it stays on one line: the breaks moved with the length of the paths in it, and a
+    phrase or a path split over two lines could not be searched for.
+    """
+    text = f"shapemotion: error: {exc}"
+    if sys.stderr.isatty():
+        text = textwrap.fill(text, width=100, subsequent_indent="  ", break_long_words=False, break_on_hyphens=False)
+    print(text, file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -40,6 +40,31 @@ def test_console_script_exit_codes(tmp_path):
 
 
 @pytest.mark.slow
+def test_an_error_is_one_line_in_a_log_and_wrapped_between_words_on_a_terminal(tmp_path, monkeypatch, capsys):
+    """The CLI's wrapping once split "1 clip(s) do not verify" where the temporary folder's length
+    put the 100th column, so a test passed or failed by the run's number (pytest-1 or pytest-542)."""
+    import io
+
+    from stimuli.cli import print_user_error
+
+    path = tmp_path / ("a-long-folder-name-" * 6) / "manifest.csv"
+    message = f"{path}: 1 clip(s) do not verify; run 'shapemotion render --out DIR --verify' to list them"
+    print_user_error(message)
+    assert capsys.readouterr().err == f"shapemotion: error: {message}\n"
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    print_user_error(message)
+    lines = terminal.getvalue().splitlines()
+    assert len(lines) > 1 and all(line.startswith("  ") for line in lines[1:])
+    assert str(path) + ":" in [word for line in lines for word in line.split()]   # the path whole, on one line
+    assert " ".join(terminal.getvalue().split()) == f"shapemotion: error: {message}"
+
+
 def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     code, out, _ = run_cli("demo", "--out", tmp_path, "--quick")
     assert code == 0
