@@ -131,6 +131,46 @@ def test_cache_returns_the_same_body(tmp_path, monkeypatch):
     assert not fit_body("M", 1.77, 27.0).fit.cached
 
 
+def test_a_cut_short_anny_cache_file_is_removed_and_built_again(tmp_path, monkeypatch, capsys):
+    """Anny writes its model cache in place: a write cut short by a full disk used to make every later
+    start fail (SafetensorError: incomplete metadata) until the user found and removed the file."""
+    import anny
+    from anny.paths import get_anny_cache_path, set_anny_cache_path
+
+    from stimuli.bodies import backend
+
+    version = tmp_path / "anny" / "v14"
+    version.mkdir(parents=True)
+    good = version / "kept.safetensors"
+    good.write_bytes(b"\x02\x00\x00\x00\x00\x00\x00\x00{}")   # an empty, complete file
+    (version / "cut.safetensors").write_bytes(b"\x40\x00\x00\x00\x00\x00\x00\x00{\"a\": {\"dtype\"")
+    builds = []
+
+    class Model:   # stands for anny.Anny: fails while the cut file is there, as Anny's loader does
+        def __init__(self, **kwargs):
+            builds.append(kwargs)
+            if (version / "cut.safetensors").exists():
+                raise RuntimeError("Error while deserializing header: incomplete metadata, file not fully covered")
+
+        def eval(self):
+            return self
+
+    monkeypatch.setenv("ANNY_CACHE_DIR", str(tmp_path / "anny"))
+    monkeypatch.setattr(anny, "Anny", Model)
+    saved = get_anny_cache_path()
+    try:
+        assert isinstance(backend.model.__wrapped__(), Model)
+        assert len(builds) == 2 and good.exists() and not (version / "cut.safetensors").exists()
+        assert "1 damaged file(s) (a write cut short) removed" in capsys.readouterr().err
+        # a failure with no damaged file behind it is not hidden
+        monkeypatch.setattr(anny, "Anny", lambda **kwargs: (_ for _ in ()).throw(MemoryError("out of memory")))
+        with pytest.raises(MemoryError):
+            backend.model.__wrapped__()
+        assert good.exists()
+    finally:
+        set_anny_cache_path(saved)
+
+
 def test_skinning_rest_pose_and_rigid_root_motion(exp1_bodies):
     body = exp1_bodies["F_Hi2"]
     rot, root = body.rest_pose()

@@ -85,6 +85,29 @@ def _native_stderr_without(benign: str):
                     print(line, file=sys.stderr)
 
 
+def drop_damaged_safetensors(folder: Path) -> list[Path]:
+    """Remove the ``.safetensors`` files under ``folder`` whose header or data do not read (a file
+    cut short); return them. Files that read are kept.
+
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> _ = (folder / "cut.safetensors").write_bytes(b"\\x10\\x00\\x00\\x00\\x00\\x00\\x00\\x00{")
+    >>> [p.name for p in drop_damaged_safetensors(folder)], list(folder.iterdir())
+    (['cut.safetensors'], [])
+    """
+    from safetensors import safe_open
+
+    damaged = []
+    for path in sorted(Path(folder).rglob("*.safetensors")):
+        try:
+            with safe_open(str(path), "numpy") as handle:
+                handle.keys()
+        except Exception:
+            path.unlink(missing_ok=True)
+            damaged.append(path)
+    return damaged
+
+
 @functools.lru_cache(maxsize=1)
 def model():
     """The Anny full-body model (default rig and topology), loaded once per process.
@@ -109,7 +132,17 @@ def model():
     cache.mkdir(parents=True, exist_ok=True)
     set_anny_cache_path(cache)
     start = time.perf_counter()
-    built = anny.Anny(extrapolate_phenotypes=True)
+    try:
+        built = anny.Anny(extrapolate_phenotypes=True)
+    except Exception:
+        # Anny writes its cache in place: a write cut short (a full disk) leaves a file that every
+        # later start fails on. Remove only the files that do not read, and build them again.
+        damaged = drop_damaged_safetensors(cache)
+        if not damaged:
+            raise
+        print(f"Anny's model cache {cache}: {len(damaged)} damaged file(s) (a write cut short) removed; "
+              "building them again (about a minute)", file=sys.stderr)
+        built = anny.Anny(extrapolate_phenotypes=True)
     built.eval()
     LOAD_SECONDS["model"] = time.perf_counter() - start
     return built
