@@ -39,7 +39,6 @@ def test_console_script_exit_codes(tmp_path):
     assert failed.returncode == 2 and "Traceback" not in failed.stderr and "required field is missing" in failed.stderr
 
 
-@pytest.mark.slow
 def test_an_error_is_one_line_in_a_log_and_wrapped_between_words_on_a_terminal(tmp_path, monkeypatch, capsys):
     """The CLI's wrapping once split "1 clip(s) do not verify" where the temporary folder's length
     put the 100th column, so a test passed or failed by the run's number (pytest-1 or pytest-542)."""
@@ -65,6 +64,7 @@ def test_an_error_is_one_line_in_a_log_and_wrapped_between_words_on_a_terminal(t
     assert " ".join(terminal.getvalue().split()) == f"shapemotion: error: {message}"
 
 
+@pytest.mark.slow
 def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     code, out, _ = run_cli("demo", "--out", tmp_path, "--quick")
     assert code == 0
