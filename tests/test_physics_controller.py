@@ -169,12 +169,12 @@ def _cmu_walk(cycles: int):
 MOCAP = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"
 # Walks whose simulation meets issue 21's bound on the base body (PD + feed-forward + swing placement)
 # and those that do not yet: strict expected failures, which turn into failures the day they meet it
-# (docs/readme_physics.md: the walk hop). Flight measured: 0.000-0.008 against 0 on the first four; the
-# Bandai walk 0.002 since the clean-up's leg IK stopped bending its straight knee backwards (0.128 before).
+# (docs/readme_physics.md: the walk hop). Flight measured: 0 against 0 on all five since the clean-up's
+# toes bend at the ball (0.000-0.008 before; the Bandai walk 0.002, and 0.128 before the leg-IK fix).
 MEETS = ["cmu_35_01_walk.bvh", "more/cmu_02_01_walk_mb2names_120fps.bvh", "more/cmu_07_01_walk_cc4rig_60fps.bvh",
          "more/cmu_07_02_walk_cc4rig_60fps_NOTOES_derived.bvh", "more/bandai1_walk_normal_001_30fps.bvh"]
-NOT_YET = {"more/cmu_07_12_brisk_walk_cc4rig_60fps_tpose_frame0.bvh": "0.094 against 0",
-           "more/cmu_131_02_start_walk_stop_maxnames_120fps.bvh": "0.089 against 0.034"}
+NOT_YET = {"more/cmu_07_12_brisk_walk_cc4rig_60fps_tpose_frame0.bvh": "0.055 against 0",
+           "more/cmu_131_02_start_walk_stop_maxnames_120fps.bvh": "0.092 against 0.051"}
 
 
 def _walk_report(name: str) -> dict:

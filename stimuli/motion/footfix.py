@@ -305,14 +305,17 @@ def blend_frames(fps: float) -> int:
 
 def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, belt: np.ndarray,
                     fps: float, blend: int | None = None, cyclic: bool = True,
-                    follow: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    follow: np.ndarray | None = None, rear_pivot: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ankle targets (T×3), blend weights (T) and the planted sole point of each contact frame (T:
     index into the foot's sole points, −1 out of contact) for one foot (see the module docstring).
     ``blend``: frames blended around each contact (default :func:`blend_frames` of ``fps``).
 
     In contact the targets come from ``sole`` and ``ankle``; the frames around a contact carry
     the correction at its first or last frame on the ankle path ``follow`` (default ``ankle``):
-    the motion being cleaned, when the footprints come from a reference pose.
+    the motion being cleaned, when the footprints come from a reference pose. ``rear_pivot``: a
+    foot whose toes bend (:mod:`stimuli.motion.toes`) turns about the rearmost of the points it
+    stands on (sole points within :data:`PIVOT_SWITCH_M` of its lowest; heel, ball, tip order), so
+    it rolls over the ball with its toes flat, not over the tips of toes held straight.
     """
     t_n = len(contact)
     blend = blend_frames(fps) if blend is None else blend
@@ -331,7 +334,8 @@ def contact_targets(sole: np.ndarray, ankle: np.ndarray, contact: np.ndarray, be
         anchor, pivot = None, -1
         for t in range(s, e):
             offsets = sole_r[t] - ankle_r[t]  # sole points relative to the ankle (foot orientation kept)
-            k = int(np.argmin(sole_r[t, :, 1]))
+            heights = sole_r[t, :, 1]
+            k = int(np.argmax(heights - heights.min() < PIVOT_SWITCH_M)) if rear_pivot else int(np.argmin(heights))
             # Hysteresis: a flat foot has tied points; switch pivot only for a clearly lower point.
             if pivot >= 0 and sole_r[t, pivot, 1] - sole_r[t, k, 1] < PIVOT_SWITCH_M:
                 k = pivot
@@ -596,19 +600,25 @@ def swing_clearance(contact: np.ndarray, height: float) -> np.ndarray:
 def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: float = 0.0,
                floor_y: float | None = None, cyclic: bool = True, iterations: int = 2,
                clearance_m: float = 0.0, reference: Motion | None = None,
-               points: dict | None = None) -> Motion:
+               points: dict | None = None, bend_toes: bool = False) -> Motion:
     """Apply the contact clean-up to a motion; ``contacts`` maps "l"/"r" to T booleans.
 
     ``clearance_m`` lifts a swinging foot whose lowest point would pass lower than a half-sine
     profile of that peak height (a foot must clear the ground, or it would scuff). ``reference``
     (same skeleton and length) supplies where planted feet go, e.g. the motion before the pelvis
-    was moved for balance, so that moving the pelvis does not move the footprints.
+    was moved for balance, so that moving the pelvis does not move the footprints. ``bend_toes``
+    (a rig whose toes rest at the identity, ``points`` with the tip on a toe joint): planted toes
+    bend at the ball (:func:`stimuli.motion.toes.level_toes`) and a foot turns about its ball.
     """
+    from stimuli.motion.toes import MAX_TOE_BEND_DEG, level_toes
+
     belt = np.array([0.0, 0.0, -belt_speed])
     points = sole_points(motion, floor_y) if points is None else points
     roles = role_indices(motion)
     rot, root = motion.rotations.copy(), motion.root_translation.copy()
     rot = flatten_feet(motion, rot, root, contacts, cyclic)
+    if bend_toes:
+        rot = level_toes(motion, rot, root, contacts, points, cyclic)
     _, src = motion.global_transforms()
     src_len = {s: np.linalg.norm(src[:, roles[f"{s}_ankle"]] - src[:, roles[f"{s}_hip"]], axis=1) for s in SIDES}
     rolls, unlifted = {}, {}
@@ -616,13 +626,14 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     for it in range(iterations):
         grot, gpos = motion.global_transforms(rot, root)
         rgrot, rgpos = (grot, gpos) if reference is None or it > 0 else reference.global_transforms()
-        targets, feet, free, foot_offsets, weights = {}, {}, {}, {}, {}
+        targets, feet, free, foot_offsets, weights, toes = {}, {}, {}, {}, {}, {}
         for s in SIDES:
             ankle = gpos[:, roles[f"{s}_ankle"]]
             sole = sole_positions(grot, gpos, points[s])
             rsole = sole_positions(rgrot, rgpos, points[s])
             rankle = rgpos[:, roles[f"{s}_ankle"]]
-            tgt, w, planted = contact_targets(rsole, rankle, contacts[s], belt, motion.fps, cyclic=cyclic, follow=ankle)
+            tgt, w, planted = contact_targets(rsole, rankle, contacts[s], belt, motion.fps, cyclic=cyclic, follow=ankle,
+                                              rear_pivot=bend_toes)
             tgt = ankle + w[:, None] * (tgt - ankle)
             # Out of contact the foot follows the motion (blended into and out of its footprints).
             free[s], weights[s] = w == 0, w
@@ -631,16 +642,28 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
             # The sole points in the foot's own frame, to place them for any foot rotation.
             foot_offsets[s] = quat.rotate(quat.inv(foot)[:, None], sole - ankle[:, None])
             reach = leg_reach(gpos, roles, s)
-            targets[s], feet[s] = rise_heel(gpos[:, roles[f"{s}_hip"]], tgt, sole - ankle[:, None], foot, reach, planted)
+            toes[s] = None
+            if bend_toes:
+                ball_joint = points[s][1][0]
+                toes[s] = (gpos[:, ball_joint] - ankle, np.radians(MAX_TOE_BEND_DEG) - quat.angle(rot[:, ball_joint]))
+            targets[s], feet[s] = rise_heel(gpos[:, roles[f"{s}_hip"]], tgt, sole - ankle[:, None], foot, reach, planted,
+                                            toes=toes[s])
             rolls[s] = (tgt, sole - ankle[:, None], foot, planted, reach)
-        lowered = _lower_pelvis(motion, gpos, roles, targets, root, cyclic)
+        needs = targets
+        if cyclic and bend_toes:
+            # The frames around a contact are blended again from its final targets below (reblend):
+            # their needs are those, heel rise included, not the footprint carried without it
+            # (with bending toes the carried footprint lowered CMU 07_12's pelvis 4 cm at toe off).
+            needs = {s: reblend(targets[s], weights[s], gpos[:, roles[f"{s}_ankle"]], gpos[:, roles[f"{s}_hip"]],
+                                blend_frames(motion.fps)) for s in SIDES}
+        lowered = _lower_pelvis(motion, gpos, roles, needs, root, cyclic)
         for s in SIDES:
             # Late in stance the foot rolls about its planted ball or toe so that the knee keeps
             # the source's bend (near a straight knee 1 cm of hip-to-ankle distance is ~18° of knee).
             tgt, offsets, foot, planted, reach = rolls[s]
             hip = gpos[:, roles[f"{s}_hip"]] + (lowered - root)
             late = roll_weight(contacts[s], cyclic=cyclic)
-            rolled, turned = roll_off(hip, tgt, offsets, foot, planted, src_len[s], late, reach)
+            rolled, turned = roll_off(hip, tgt, offsets, foot, planted, src_len[s], late, reach, toes=toes[s])
             done = late > 0
             targets[s][done], feet[s][done] = rolled[done], turned[done]
             # A swinging foot comes down with a lowered pelvis, its leg keeping its angles (held in
@@ -665,6 +688,8 @@ def clean_feet(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
         root = lowered
         for s in SIDES:
             rot = two_bone_ik(motion, rot, root, s, targets[s], feet[s])
+        if bend_toes:
+            rot = level_toes(motion, rot, root, contacts, points, cyclic)
     out = motion.replace(rotations=rot, root_translation=root)
     out.metadata["foot_cleanup"] = True
     return out
@@ -791,7 +816,8 @@ def _bisect(f, lo, hi, iterations: int = 20):
 
 
 def roll_off(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.ndarray, planted: np.ndarray,
-             want: np.ndarray, weight: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+             want: np.ndarray, weight: np.ndarray, reach: float,
+             toes: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Ankle targets and foot rotations with the foot turned about its planted ball or toe so that
     the hip-to-ankle distance moves towards ``want`` (T, the source's: its knee bend) by
     ``weight`` (T, 0…1), never beyond ``reach``.
@@ -801,6 +827,8 @@ def roll_off(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.
     heel pitch takes up the distance instead. The foot turns heel-up at most
     :data:`MAX_HEEL_RISE_DEG` and heel-down no further than flat (no sole point below the one it
     stands on). Frames not planted on a point ahead of the ankle, or with zero weight, are kept.
+    ``toes`` as :func:`rise_heel`'s: a foot on its ball turns about the toe joint above it, then
+    over its toe tips.
 
     >>> hip = np.array([[0.0, 0.9, 0.0]])
     >>> ball = np.array([[[0.0, -0.07, 0.15], [0.0, -0.07, -0.05]]])   # ball, heel (ankle-relative)
@@ -812,11 +840,13 @@ def roll_off(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.
     todo = np.flatnonzero(_planted_ahead(target, offsets, foot, planted) & (weight > 0))
     now = np.linalg.norm(target[todo] - hip[todo], axis=1)
     goal = np.minimum(now + weight[todo] * (want[todo] - now), reach)
-    return _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down=True)
+    if toes is None:
+        return _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down=True)
+    return _turn_on_toes(hip, target, offsets, foot, planted, todo, goal, True, toes)
 
 
 def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np.ndarray, reach: float,
-              planted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+              planted: np.ndarray, toes: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Ankle targets (T×3) and foot world rotations (T×4) with the heel raised where out of reach.
 
     A trailing leg reaches its footprint at push-off by lifting the heel — the foot turns about
@@ -827,6 +857,11 @@ def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np
     that brings the ankle within reach (at most :data:`MAX_HEEL_RISE_DEG`; :func:`_lower_pelvis`
     covers any rest). Elsewhere nothing changes.
 
+    ``toes`` (bending toes, :mod:`stimuli.motion.toes`: the toe joint above the ball relative to the
+    ankle, T×3, and how much further the toes can bend, T radians): a foot planted on its ball
+    turns about that joint while its toes can bend, then over its toe tips
+    (:func:`_turn_on_toes`), as a foot rolls over its toes once they are at their limit.
+
     >>> up = np.array([[0.0, 0.9, 0.0]])
     >>> toe = np.array([[[0.0, -0.07, 0.15]]])      # the ball, 15 cm ahead of and 7 cm below the ankle
     >>> t, f = rise_heel(up, np.array([[0.0, 0.07, -0.5]]), toe, np.array([[1.0, 0, 0, 0]]), 0.95, np.array([0]))
@@ -835,7 +870,29 @@ def rise_heel(hip: np.ndarray, target: np.ndarray, offsets: np.ndarray, foot: np
     """
     far = np.linalg.norm(target - hip, axis=1) > reach
     todo = np.flatnonzero(_planted_ahead(target, offsets, foot, planted) & far)
-    return _turn_heel(hip, target, offsets, foot, planted, todo, np.full(len(todo), reach), heel_down=False)
+    if toes is None:
+        return _turn_heel(hip, target, offsets, foot, planted, todo, np.full(len(todo), reach), heel_down=False)
+    return _turn_on_toes(hip, target, offsets, foot, planted, todo, np.full(len(todo), reach), False, toes)
+
+
+def _turn_on_toes(hip, target, offsets, foot, planted, todo, goal, heel_down: bool, toes):
+    """:func:`_turn_heel` for a foot whose toes bend (``toes``: the toe joint above the ball
+    relative to the ankle, T×3, and the toes' room to bend, T radians): planted on its ball
+    (sole point 1) it turns about that joint, heel-up no further than the room; still short of
+    ``goal``, it rolls on over its toe tips (the last sole point), which the turn about the joint
+    left where they were, up to :data:`MAX_HEEL_RISE_DEG` in all."""
+    hinge, room = toes
+    on_ball = planted[todo] == 1
+    ball = todo[on_ball]
+    out, turned = _turn_heel(hip, target, offsets, foot, planted, todo[~on_ball], goal[~on_ball], heel_down)
+    out, turned, used = _turn_foot(hip, out, offsets, turned, planted, ball, goal[on_ball], heel_down,
+                                   pivot_offset=hinge[ball], most=room[ball])
+    short = np.linalg.norm(out[ball] - hip[ball], axis=1) > goal[on_ball] + 1e-6
+    last = ball[short]
+    tips = target[last] + offsets[last, -1] - out[last]
+    out, turned, _ = _turn_foot(hip, out, offsets, turned, planted, last, goal[on_ball][short], False,
+                                pivot_offset=tips, most=np.radians(MAX_HEEL_RISE_DEG) - np.maximum(used[short], 0.0))
+    return out, turned
 
 
 def _planted_ahead(target, offsets, foot, planted) -> np.ndarray:
@@ -854,11 +911,19 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
     """Turn the foot of frames ``todo`` about its planted point until the ankle is ``goal`` from
     the hip: heel-up at most :data:`MAX_HEEL_RISE_DEG` and no further than the ankle straight above
     the pivot, heel-down (if allowed) until flat."""
+    return _turn_foot(hip, target, offsets, foot, planted, todo, goal, heel_down)[:2]
+
+
+def _turn_foot(hip, target, offsets, foot, planted, todo, goal, heel_down: bool, pivot_offset=None, most=None):
+    """:func:`_turn_heel` with, for the ``todo`` frames, the pivot at ``pivot_offset`` from the ankle
+    target (default: the planted sole point) and the heel rise capped at ``most`` (radians);
+    returns the targets, the feet and the turn of each ``todo`` frame."""
     target, foot = target.copy(), foot.copy()
     if not len(todo):
-        return target, foot
+        return target, foot, np.zeros(0)
     idx = planted[todo]
-    pivot = target[todo] + offsets[todo, idx]
+    off = offsets[todo, idx] if pivot_offset is None else pivot_offset
+    pivot = target[todo] + off
     arm = target[todo] - pivot
     up = np.array([0.0, 1.0, 0.0])
     axis = np.cross(arm, up)
@@ -873,12 +938,14 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
     axis[steep] = np.cross(back[steep], up)
     lo = np.zeros(len(todo))
     if heel_down:
-        # The other sole points relative to the planted one: heel-down stops where one touches.
-        others = offsets[todo] - offsets[todo, idx][:, None]
+        # The other sole points relative to the pivot: heel-down stops where one touches the floor
+        # (the planted point is on it; a pivot above it, a toe joint, is at its own height).
+        others = offsets[todo] - off[:, None]
+        floor = np.zeros(len(todo)) if pivot_offset is None else -pivot[:, 1]
 
         def below(angle):
             q = quat.from_axis_angle(axis * angle[:, None])
-            return quat.rotate(q[:, None], others)[:, :, 1].min(axis=1) < -1e-4
+            return quat.rotate(q[:, None], others)[:, :, 1].min(axis=1) < floor - 1e-4
 
         lo = _bisect(below, np.full(len(todo), -np.radians(60.0)), lo)
     # The distance to the hip shrinks as the heel rises.
@@ -888,11 +955,13 @@ def _turn_heel(hip, target, offsets, foot, planted, todo, goal, heel_down: bool)
     # vertical, spun 100° about its long axis in 5 frames).
     upright = np.arctan2(np.einsum("ij,ij->i", arm, np.cross(up, axis)), arm[:, 1])
     hi = np.clip(upright, 0.0, np.radians(MAX_HEEL_RISE_DEG))
+    if most is not None:
+        hi = np.minimum(hi, np.maximum(most, 0.0))
     angle = _bisect(lambda a: np.linalg.norm(_turn_about(pivot, arm, axis, a) - hip[todo], axis=1) > goal,
                     np.minimum(lo, hi), hi)
     target[todo] = _turn_about(pivot, arm, axis, angle)
     foot[todo] = quat.mul(quat.from_axis_angle(axis * angle[:, None]), foot[todo])
-    return target, foot
+    return target, foot, angle
 
 
 def least_above(x: np.ndarray, lo: np.ndarray, hi: np.ndarray, cyclic: bool = False) -> np.ndarray:
@@ -937,7 +1006,7 @@ def pivot_reach(hip: np.ndarray, pivot: np.ndarray, ankle: np.ndarray, reach: np
 
 
 def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.ndarray], points: dict,
-                   rate_dps: float | None = None, cyclic: bool = True) -> Motion:
+                   rate_dps: float | None = None, cyclic: bool = True, bend_toes: bool = False) -> Motion:
     """The motion with each knee turning between two frames no more than ``reference``'s knee (the
     motion before the clean-up) does there plus ``rate_dps`` degrees per second (:data:`KNEE_RATE_DPS`).
 
@@ -952,9 +1021,12 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
     A knee whose largest change between frames is within the source knee's largest + the margin is
     left untouched (generated gaits: the bound would only reshape a knee that never snaps).
     ``contacts`` maps "l"/"r" to T booleans; ``points`` as :func:`sole_points` gives them (heel first).
+    ``bend_toes`` (as :func:`clean_feet`'s): a foot on its ball turns about the toe joint the ball
+    hangs from, and its toes bend to stay on the floor (:func:`stimuli.motion.toes.level_toes`).
     """
     from stimuli.motion.contact import LOW_BAND_M
     from stimuli.motion.metrics import knee_angles
+    from stimuli.motion.toes import MAX_TOE_BEND_DEG, level_toes
 
     margin = (KNEE_RATE_DPS if rate_dps is None else rate_dps) / motion.fps
     roles = role_indices(motion)
@@ -986,6 +1058,15 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
         touching = sole[:, :, 1] <= sole[:, :, 1].min(axis=1, keepdims=True) + LOW_BAND_M
         front = np.where(touching, np.arange(sole.shape[1]), -1).max(axis=1)
         pivot = sole[np.arange(len(sole)), front]
+        if bend_toes:
+            # On its ball the foot turns about the toe joint above it, which the level toes keep
+            # at its height (turned about the sole point below, the joint sank 1 cm at 45°); toes
+            # at their limit turn with the foot, about its foremost point.
+            ball_joint = points[s][1][0]
+            room = np.radians(MAX_TOE_BEND_DEG) - quat.angle(rot[down, ball_joint])
+            on_ball = touching[:, 1] & (room > np.radians(0.5))
+            pivot[on_ball] = gpos[down[on_ball], ball_joint]
+            tips = sole[:, -1]
         # Only a ball or toe ahead of the ankle is a pivot: turned about the heel (a landing foot
         # on its heel alone), the bend pitched the toes up by 29° in one frame on an unseen toe-less
         # walk. There the foot rises along the hip-to-ankle line, as a swinging one does.
@@ -993,7 +1074,23 @@ def keep_knee_rate(motion: Motion, reference: Motion, contacts: dict[str, np.nda
         down, pivot = down[ahead], pivot[ahead]
         target[down] = pivot_reach(hip[down], pivot, ankle[down], goal[down])
         foot[down] = quat.mul(quat.between(pivot - ankle[down], pivot - target[down]), foot[down])
+        if bend_toes:
+            # A turn about the toe joint beyond the toes' room goes on about the toe tips.
+            on_ball, room, tips = on_ball[ahead], room[ahead], tips[ahead]
+            turn = quat.angle(quat.between(pivot - ankle[down], pivot - target[down]))
+            over = np.flatnonzero(on_ball & (turn > room))
+            if len(over):
+                rows, joint = down[over], pivot[over]
+                axis = np.cross(ankle[rows] - joint, target[rows] - joint)
+                axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+                first = quat.from_axis_angle(axis * room[over, None])
+                start = joint + quat.rotate(first, ankle[rows] - joint)
+                target[rows] = pivot_reach(hip[rows], tips[over], start, goal[rows])
+                foot[rows] = quat.mul(quat.between(tips[over] - start, tips[over] - target[rows]),
+                                      quat.mul(first, grot[rows, roles[f"{s}_ankle"]]))
         rot = two_bone_ik(motion, rot, root, s, target, foot)
+    if bend_toes:
+        rot = level_toes(motion, rot, root, contacts, points, cyclic)
     return motion.replace(rotations=rot)
 
 
@@ -1034,7 +1131,10 @@ def ease_edges(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     :data:`BLEND_S` seconds on the frames farther from the contact, the foot keeps its orientation
     and height, and hip and knee reach it (:func:`two_bone_ik`). Only an edge whose low frames move
     faster than HUMOS's speed over the belt is eased: a motion that does not skate there (every
-    generated gait) comes back unchanged.
+    generated gait on its own rig, and its walks on a body) comes back unchanged. In a run (a clip
+    with frames of flight) the frame after a low frame counts as low too: HUMOS's 20-fps pairs fall
+    between 30-fps frames, and a generated jog on a body, its toes pushing off from the ball, left
+    the floor from a 25-mm-high toe joint between two (F_Lo2: 5.9 % skate without this).
 
     >>> from stimuli.motion.generate import GaitParams, generate
     >>> m = generate(GaitParams(), 1.75)
@@ -1049,13 +1149,19 @@ def ease_edges(motion: Motion, contacts: dict[str, np.ndarray], belt_speed: floa
     t_n, fps = motion.n_frames, motion.fps
     fade = blend_frames(fps)
     rot = motion.rotations
+    running = not np.all(contacts["l"] | contacts["r"])
     for s in SIDES:
         joint = roles.get(f"{s}_toe", roles[f"{s}_ankle"])
         # Horizontal place on the belt (a planted foot stays put there).
         place = gpos[:, joint][:, [0, 2]] + np.column_stack([np.zeros(t_n), np.arange(t_n) * belt_speed / fps])
         shift = np.zeros((t_n, 2))
         weight = np.zeros(t_n)
-        for edge, run in _edge_runs(contacts[s], gpos[:, joint, 1] < HUMOS_HEIGHT_M, cyclic):
+        low = gpos[:, joint, 1] < HUMOS_HEIGHT_M
+        if running:
+            # HUMOS samples at 20 fps: a pair can fall between a low frame and the next, where the
+            # joint is still low (a jog's toes, pushing off from the ball, release it from 25 mm).
+            low |= np.roll(low, 1)
+        for edge, run in _edge_runs(contacts[s], low, cyclic):
             # Unwrapped frame numbers, so the belt's travel across a loop's seam counts.
             step = 1 if run[0] == (edge + 1) % t_n else -1
             frames = [edge + step * (i + 1) for i in range(len(run))]

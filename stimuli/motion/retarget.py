@@ -21,8 +21,11 @@ Method (rest-pose alignment, then clean-up):
    sole points come from the body mesh so the ground is at y = 0; a foot whose ball slides low next
    to a contact is held over its footprint there (``footfix.ease_edges``); last, each knee is kept
    from turning faster than the source's (``footfix.keep_knee_rate``: no knee snap at contact edges).
+   The toes bend at the ball while the foot stands on them (:mod:`stimuli.motion.toes`): the foot
+   turns about the ball, then rolls over the toe tips, instead of standing on straight toes' tips.
 
-Twist bones, toes and fingers keep their rest orientation relative to their parents.
+Twist bones and fingers keep their rest orientation relative to their parents; so do the toes, but
+for their bend in contact.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from stimuli.motion.footfix import (clean_feet, contact_runs, ease_edges, flat_f
                                     leg_joint_indices, lock_feet, sole_positions)
 from stimuli.motion.motion import Motion
 from stimuli.motion.skeleton import NAMINGS, leg_length, role_indices
+from stimuli.motion.toes import toe_joints
 
 ANNY_ROLES = {role: names[0] for role, names in NAMINGS["anny"].items()}
 # Anny bone → (source role whose world rotation drives it, (from role, to role) of the segment).
@@ -288,7 +292,8 @@ def _to_local(world: dict[int, np.ndarray], parents: np.ndarray, t: int) -> np.n
 
 
 def mesh_sole_points(body) -> dict[str, list[tuple[int, np.ndarray]]]:
-    """Heel, ball and toe-tip points of each foot from the rest mesh, attached to the foot bone."""
+    """Heel, ball and toe-tip points of each foot from the rest mesh: heel and ball attached to the
+    foot bone, the tip to its toe's first joint."""
     rig = body.rig
     v = np.asarray(body.vertices, float)
     rest = _rest_pos(rig)
@@ -303,11 +308,19 @@ def mesh_sole_points(body) -> dict[str, list[tuple[int, np.ndarray]]]:
         tip = sole[np.argmax(sole[:, 2])]
         ball_z = rest[rig.index(f"toe1-1.{S}"), 2]
         ball = sole[np.argmin(np.abs(sole[:, 2] - ball_z) + 10 * sole[:, 1])]
+        # Ball and tip go with the toe they lie under (the nearest toe joint), so that they follow
+        # the toes' bend (stimuli.motion.toes): a foot standing on level toes then turns about the
+        # toe joint, which stays at its height, as the metatarsal heads roll.
+        toes = [j for j in range(len(rig.names)) if rig.parents[j] == foot]
+
+        def under(p):
+            return toes[int(np.argmin([abs(rest[j, 0] - p[0]) for j in toes]))] if toes else foot
+
         pts = []
-        for p in (heel, ball, tip):
+        for p, joint in ((heel, foot), (ball, under(ball)), (tip, under(tip))):
             q = p.copy()
             q[1] = 0.0  # the rest mesh stands on y = 0
-            pts.append((foot, q - rest[foot]))
+            pts.append((joint, q - rest[joint]))
         out[s] = pts
     return out
 
@@ -441,8 +454,9 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: boo
     """Ground the body (lowest sole point of the planted feet at y = 0), then the contact clean-up;
     with ``foot_lock`` then the whole-clip foot-locking solve (``footfix.lock_feet``, contacts from
     ``contact.foot_contacts`` on the body's sole points). The metadata records how far the joints
-    moved from the retargeted source: ``joint_change_max_deg`` (any joint) and
-    ``joint_change_rms_deg`` (hips, knees and ankles)."""
+    moved from the retargeted source: ``joint_change_max_deg`` (any joint but the toes) and
+    ``joint_change_rms_deg`` (hips, knees and ankles), and ``toe_bend_max_deg``, the largest bend
+    of the toes at the ball (:mod:`stimuli.motion.toes`)."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
     low = np.min([sole_positions(grot, gpos, pts[s])[:, :, 1].min(axis=1) for s in ("l", "r")], axis=0)
@@ -457,20 +471,28 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: boo
         contact = planted(m, body)
     belt = float(m.metadata.get("belt_speed_mps", 0.0)) if m.metadata.get("treadmill") else 0.0
     cyclic = bool(m.metadata.get("looped"))
-    out = clean_feet(m, contact, belt_speed=belt, cyclic=cyclic, points=pts, clearance_m=0.03, iterations=3)
+    out = clean_feet(m, contact, belt_speed=belt, cyclic=cyclic, points=pts, clearance_m=0.03, iterations=3,
+                     bend_toes=True)
     walking = bool(np.all(contact["l"] | contact["r"]))
     if cyclic and balance_root and walking:
         # Move the pelvis so the ZMP follows the feet, then re-plant the feet where they were
         # (walks only: with a flight phase the cart-table model has no support to follow).
         balanced = balance(out, contact, points=pts)
         out = clean_feet(balanced, contact, belt_speed=belt, cyclic=True, points=pts, clearance_m=0.03, iterations=3,
-                         reference=out)
+                         reference=out, bend_toes=True)
     out = ease_edges(out, contact, belt_speed=belt, cyclic=cyclic)
-    out = keep_knee_rate(out, m, contact, pts, cyclic=cyclic)
+    out = keep_knee_rate(out, m, contact, pts, cyclic=cyclic, bend_toes=True)
     if foot_lock:
         locked = foot_contacts(out, pts, floor_y=0.0)
         out, contact = lock_feet(out, locked, pts), locked.down
     out.metadata["contacts"] = {s: c.astype(int).tolist() for s, c in contact.items()}
-    biggest, rms = joint_change_deg(motion.rotations, out.rotations, leg_joint_indices(motion))
-    out.metadata.update(joint_change_max_deg=round(biggest, 2), joint_change_rms_deg=round(rms, 3))
+    # The toes' bend is a joint the source does not move (retargeted toes keep their rest pose):
+    # reported on its own, so that the joint change still says how far the clean-up moved the rest.
+    toes = [j for s in ("l", "r") for j in toe_joints(out, s)]
+    kept = out.rotations.copy()
+    kept[:, toes] = motion.rotations[:, toes]
+    biggest, rms = joint_change_deg(motion.rotations, kept, leg_joint_indices(motion))
+    bend = float(np.degrees(quat.angle(out.rotations[:, toes])).max()) if toes else 0.0
+    out.metadata.update(joint_change_max_deg=round(biggest, 2), joint_change_rms_deg=round(rms, 3),
+                        toe_bend_max_deg=round(bend, 1))
     return out
