@@ -292,8 +292,8 @@ def _to_local(world: dict[int, np.ndarray], parents: np.ndarray, t: int) -> np.n
 
 
 def mesh_sole_points(body) -> dict[str, list[tuple[int, np.ndarray]]]:
-    """Heel, ball and toe-tip points of each foot from the rest mesh: heel and ball attached to the
-    foot bone, the tip to its toe's first joint."""
+    """Heel, ball and toe-tip points of each foot from the rest mesh: the heel attached to the foot
+    bone, ball and tip to the first joint of the toe they lie under (they follow the toes' bend)."""
     rig = body.rig
     v = np.asarray(body.vertices, float)
     rest = _rest_pos(rig)
