@@ -86,22 +86,20 @@ def level_toes(motion, rot: np.ndarray, root: np.ndarray, contacts: dict[str, np
     roles = role_indices(motion)
     rest = motion.rest_positions()
     up = np.array([0.0, 1.0, 0.0])
-    for s in SIDES:
-        toes = toe_joints(motion, s)
+    sides = {s: toe_joints(motion, s) for s in SIDES}
+    sides = {s: toes for s, toes in sides.items() if points[s][-1][0] in toes}   # a tip on the foot: no bend
+    for toes in sides.values():
+        out[:, toes] = quat.IDENTITY
+    grot, gpos = motion.global_transforms(out, root)
+    for s, toes in sides.items():
         (ball_joint, ball_offset), (tip_joint, tip_offset) = points[s][1], points[s][-1]
-        if tip_joint not in toes:
-            continue     # a toe tip on the foot bone itself: nothing to bend
         # The toes' hinge: across the rest toe line, in the rest frame the local rotations use.
         line = rest[tip_joint] + tip_offset - rest[ball_joint] - ball_offset
         hinge = np.cross(line * [1.0, 0.0, 1.0], up)
         hinge /= np.linalg.norm(hinge)
-        out[:, toes] = quat.IDENTITY
-        grot, gpos = motion.global_transforms(out, root)
         sole = sole_positions(grot, gpos, points[s])
         axis = quat.rotate(grot[:, roles[f"{s}_ankle"]], hinge)
         bend = np.where(contacts[s], bend_needed(sole[:, 1], sole[:, -1], axis), 0.0)
         bend, _ = rate_limited_envelope(bend, np.ones(len(bend), bool), rate, cyclic)
-        turn = quat.from_axis_angle(hinge * bend[:, None])
-        for j in toes:
-            out[:, j] = quat.mul(turn, out[:, j])
+        out[:, toes] = quat.from_axis_angle(hinge * bend[:, None])[:, None]
     return out
