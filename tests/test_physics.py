@@ -93,13 +93,42 @@ def test_ragdoll_model_mass_dofs_and_rest_pose(bodies):
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     assert model.body_mass.sum() == pytest.approx(70.0, rel=1e-6)
-    assert model.nu == 28 and model.nv == 34 and model.nbody == 16
+    assert model.nu == 30 and model.nv == 36 and model.nbody == 18
     rig = bodies["hi"].rig
     for label, bone in (("lower_leg.L", "lowerleg01.L"), ("head", "neck01"), ("upper_arm.R", "upperarm01.R")):
         np.testing.assert_allclose(data.xpos[model.body(label).id], rig.rest_heads[rig.index(bone)], atol=1e-6)
     # Whole-body CoM of the compiled model is the Table-1 CoM.
     com = inertia.whole_body_com(inertia.segment_masses(bodies["hi"].segments, 70.0))
     np.testing.assert_allclose(data.subtree_com[model.body("pelvis").id], com, atol=1e-6)
+
+
+def test_the_toes_hinge_at_the_ball_and_share_the_feet_mass(bodies):
+    """Each foot is two boxes, heel to ball and ball to tips, soles on the floor at rest; the toes
+    hinge at the ball about a level axis; Table 1's foot mass is split between them and its
+    centre of mass kept."""
+    from stimuli.physics.ragdoll import build_ragdoll, compile_model
+    from stimuli.physics.simulate import foot_geoms, lowest_corner
+
+    body = bodies["hi"]
+    rd = build_ragdoll(body, 70.0)
+    model = compile_model(rd, 1e-3, {d: 1.0 for d in rd.dof_names}, {d: 1.0 for d in rd.dof_names})
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    table = {m.label: m for m in inertia.segment_masses(body.segments, 70.0)}
+    segs = {s.label: s for s in body.segments}
+    for side in "LR":
+        foot, toes = model.body(f"foot.{side}").id, model.body(f"toes.{side}").id
+        np.testing.assert_allclose(data.xpos[toes], segs[f"foot.{side}"].distal, atol=1e-6)
+        assert model.body_mass[foot] + model.body_mass[toes] == pytest.approx(table[f"foot.{side}"].mass_kg, rel=1e-6)   # MJCF: 6 digits
+        assert 0.05 < model.body_mass[toes] / table[f"foot.{side}"].mass_kg < 0.3
+        both = data.xipos[[foot, toes]].T @ model.body_mass[[foot, toes]] / model.body_mass[[foot, toes]].sum()
+        np.testing.assert_allclose(both, table[f"foot.{side}"].com, atol=1e-6)
+        axis = model.jnt_axis[model.joint(f"toe.{side}").id]
+        assert abs(axis[1]) < 1e-9 and abs(axis[0]) > 0.95
+        toe_geom = model.geom(f"toes.{side}").id
+        assert data.geom_xpos[toe_geom][2] > data.xpos[foot][2]          # ahead of the heel–ball box
+        for geom in foot_geoms(model)[side == "R"]:
+            assert lowest_corner(model, data, geom) == pytest.approx(0.0, abs=1e-6)
 
 
 def test_reference_body_tracks_within_3_degrees_without_falling(ref_result):

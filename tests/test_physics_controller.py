@@ -139,12 +139,13 @@ def test_gains_are_fixed_across_bodies_and_the_report_shows_the_controller(walk,
     for r in reports:
         assert r["gains"] == reports[0]["gains"]
         assert (r["gains"]["k_p"], r["gains"]["k_d"]) == (shipped.k_p, shipped.k_d)   # the same gains.json entry
-        assert r["controller"] == {"feedforward": True, "torque_limits": False, "swing_placement": True, "toes": False}
+        assert r["controller"] == {"feedforward": True, "torque_limits": False, "swing_placement": True, "toes": False,
+                                   "toe_segment": True}
         assert r["reference_flight_fraction"] == 0.0
         assert set(r["torque_peaks_nm"]) == set(shipped.profile)
         assert all(v["limit"] > 0 and v["peak"] >= 0 for v in r["torque_peaks_nm"].values())
         sourced = {d for d, v in r["torque_peaks_nm"].items() if v["sourced"]}
-        assert {"knee.L", "hip.R:X", "hip.R:Z", "ankle.L:Z", "elbow.R", "spine:X", "neck:Y", "shoulder.L:X"} <= sourced
+        assert {"knee.L", "hip.R:X", "hip.R:Z", "ankle.L:Z", "elbow.R", "spine:X", "neck:Y", "shoulder.L:X", "toe.R"} <= sourced
         assert not sourced & {"spine:Z", "spine:Y", "hip.L:Y", "ankle.R:Y"}   # the unchecked axes say so
         assert not r["fell"]
     assert reports[0]["b_m"] == 0.0 and reports[1]["b_m"] > 0.0
@@ -169,12 +170,12 @@ def _cmu_walk(cycles: int):
 MOCAP = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap"
 # Walks whose simulation meets issue 21's bound on the base body (PD + feed-forward + swing placement)
 # and those that do not yet: strict expected failures, which turn into failures the day they meet it
-# (docs/readme_physics.md: the walk hop). Flight measured: 0 against 0 on all five since the clean-up's
-# toes bend at the ball (0.000-0.008 before; the Bandai walk 0.002, and 0.128 before the leg-IK fix).
+# (docs/readme_physics.md: the walk hop). Flight measured since the ragdoll has toes: 07_12 0.014 against
+# 0 (0.055 with a foot box that ended at the ball), the Bandai walk 0.002, the other four 0.
 MEETS = ["cmu_35_01_walk.bvh", "more/cmu_02_01_walk_mb2names_120fps.bvh", "more/cmu_07_01_walk_cc4rig_60fps.bvh",
-         "more/cmu_07_02_walk_cc4rig_60fps_NOTOES_derived.bvh", "more/bandai1_walk_normal_001_30fps.bvh"]
-NOT_YET = {"more/cmu_07_12_brisk_walk_cc4rig_60fps_tpose_frame0.bvh": "0.055 against 0",
-           "more/cmu_131_02_start_walk_stop_maxnames_120fps.bvh": "0.092 against 0.051"}
+         "more/cmu_07_02_walk_cc4rig_60fps_NOTOES_derived.bvh", "more/bandai1_walk_normal_001_30fps.bvh",
+         "more/cmu_07_12_brisk_walk_cc4rig_60fps_tpose_frame0.bvh"]
+NOT_YET = {"more/cmu_131_02_start_walk_stop_maxnames_120fps.bvh": "0.097 against 0.051"}
 
 
 def _walk_report(name: str) -> dict:
@@ -542,6 +543,45 @@ def test_the_reference_stands_on_the_ball_of_its_box_where_the_motion_stands_on_
     assert after.min() > -1e-4
     assert 0.0 < changed["max_pitch_deg"] <= 40.0 and 5.0 < changed["max_lower_mm"] <= 30.0
     assert np.array_equal(on_toes.root_quat, ref.root_quat)     # only the legs and the floor height change
+
+
+def test_walks_have_toes_and_jogs_stand_on_the_ball_of_their_box(walk, jog):
+    """A walk's ragdoll has toe segments, a jog's not (``TOES_BY_GAIT``; ``toe_segment=`` overrides);
+    the gains of each gait cover its ragdoll's DoFs."""
+    from stimuli.bodies import fit_body
+    from stimuli.physics.retarget import prepare
+
+    body = fit_body("M", 1.75, 23.0)
+    for motion, gait_has_toes in ((walk, True), (jog, False)):
+        for override in (None, not gait_has_toes):
+            _, ragdoll, model, gains = prepare(motion, body, toe_segment=override)
+            expected = gait_has_toes if override is None else override
+            assert ragdoll.has_toes == expected and ("toe.L" in ragdoll.dof_names) == expected
+            assert model.nu == 28 + 2 * expected
+
+
+def test_a_jogs_toes_lie_flat_where_its_box_stands_on_its_ball(jog):
+    """With toe segments on a jog (``toe_segment=True``), the box plantar-flexed onto its ball would
+    drive the generator's straight toes into the floor; they are bent up until they lie on it."""
+    import mujoco
+
+    from stimuli.bodies import fit_body
+    from stimuli.physics.feedforward import reference_stance
+    from stimuli.physics.retarget import prepare
+    from stimuli.physics.simulate import foot_geoms, lowest_corner
+    from stimuli.physics.swing import actuator_qpos
+    from stimuli.physics.toes import stand_on_toes
+
+    ref, _, model, _ = prepare(jog, fit_body("M", 1.75, 23.0), toe_segment=True)
+    on_toes, changed = stand_on_toes(ref, model, reference_stance(jog, ref.n_frames))
+    assert changed["toes_bent_share"] > 0.0 and 0.0 < changed["max_toe_bend_deg"] <= 45.0
+    data, qadr = mujoco.MjData(model), actuator_qpos(model)
+    lowest = np.inf
+    for f in range(on_toes.n_frames):
+        data.qpos[:3], data.qpos[3:7], data.qpos[qadr] = on_toes.root_pos[f], on_toes.root_quat[f], on_toes.q[f]
+        mujoco.mj_kinematics(model, data)
+        lowest = min(lowest, *(lowest_corner(model, data, g) for side in foot_geoms(model) for g in side))
+    assert lowest > -1e-4
 
 
 def test_generated_jog_flies_as_its_reference_does_with_the_feedforward(jog):

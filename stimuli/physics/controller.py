@@ -95,15 +95,17 @@ def save_gains(gains: dict[str, Gains], path: Path = GAINS_FILE) -> Path:
 # (human walking quasi-stiffness is a few hundred), so every heel strike landed on a rigid lever
 # and bounced the body off the floor — 14–18 % of a walk had no foot down (the reference: none).
 # With 0.01 (≈ 2 kN·m/rad) a walk keeps a foot on the floor and the jog's landings stop pumping
-# the pelvis (±9 cm on the heaviest man before); softer still (0.003) the heavy jog topples.
-STANCE_WEIGHTS = {"hip": 0.1, "knee": 0.1, "ankle": 0.01}
+# the pelvis (±9 cm on the heaviest man before); softer still (0.003) the heavy jog topples. The
+# toes carry the body at push-off as the ankle does and get its share (with their own inertia
+# alone, 0.01 kg·m², they lagged their bend: CMU 07_12's tracking 2.62° against 1.70°).
+STANCE_WEIGHTS = {"hip": 0.1, "knee": 0.1, "ankle": 0.01, "toe": 0.01}
 
 
 def inertia_profile(model, stance_weights: dict[str, float] | None = None) -> dict[str, float]:
     """Per-DoF inertia (kg·m²) the PD gains scale with, at the rest pose.
 
     Swing: the diagonal of the joint-space inertia matrix (what the DoF moves when the body is
-    free). Legs also carry the body in stance: for hip, knee and ankle DoFs the rest of the body's
+    free). Legs also carry the body in stance: for hip, knee, ankle and toe DoFs the rest of the body's
     inertia about the joint (point masses of the segments not below it), times the joint's
     ``stance_weights`` entry (:data:`STANCE_WEIGHTS`), is added, otherwise gravity folds a stance
     leg whose own segments are light.
@@ -235,6 +237,10 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
 # Spine flexion/extension (X): Chaffin, Andersson & Martin, Occupational Biomechanics (3rd ed., 1999),
 # Table 4.5, maximal torso extension of men at 20° of flexion, 288 N·m, as quoted in J Electromyogr
 # Kinesiol 2012;22(6):814–820, Table 2 (doi:10.1016/j.jelekin.2012.04.006): 288 N·m.
+# Toe flexion at the ball (the metatarsophalangeal joints): Goldmann & Brüggemann (2012), J Anat
+# 221:187–194, abstract (PMC3406365): maximal voluntary isometric moments of 20 men's toe flexors
+# 6.3 ± 2.6 to 14.2 ± 5.8 N·m over ankle and toe angles, the largest at 25–45° of toe dorsiflexion,
+# the push-off's: 14.2 N·m (not scaled: the abstract gives no per-kg figure).
 # The isokinetic figures (hip abduction, ankle inversion, elbow, shoulder rotation and adduction) are
 # concentric peaks, below an isometric maximum; every figure was read in a reachable abstract or
 # table (not the paper itself where only an abstract is named), none is in ../shared/seeds.
@@ -254,6 +260,7 @@ SHOULDER_FLEXION_STATIC_NM = 89.9
 SHOULDER_ADDUCTION_1989_NM = 48.0
 SHOULDER_INTERNAL_ROTATION_2011_NM = (15 * 59.5 + 18 * 65.3) / 33
 CHAFFIN_1999_TORSO_EXTENSION_NM = 288.0
+GOLDMANN_2012_MTP_FLEXION_NM = 14.2
 TORQUE_LIMITS_NM = {
     "spine": {"X": CHAFFIN_1999_TORSO_EXTENSION_NM, "Z": 200.0, "Y": 100.0},
     "neck": dict(NECK_ISOMETRIC_2014_NM),
@@ -265,11 +272,12 @@ TORQUE_LIMITS_NM = {
     "knee": {"": float(round(ANDERSON_2007_C1["knee"] * NORM_BODY_WEIGHT_HEIGHT_NM))},
     "ankle": {"X": float(round(ANDERSON_2007_C1["ankle"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
               "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)), "Y": 40.0},
+    "toe": {"": GOLDMANN_2012_MTP_FLEXION_NM},
 }
 # The axes whose limit has a published figure behind it (above); the report says which these are.
 SOURCED_LIMITS = {("hip", "X"), ("hip", "Z"), ("knee", ""), ("ankle", "X"), ("ankle", "Z"), ("elbow", ""),
                   ("neck", "X"), ("neck", "Z"), ("neck", "Y"), ("shoulder", "X"), ("shoulder", "Z"),
-                  ("shoulder", "Y"), ("spine", "X")}
+                  ("shoulder", "Y"), ("spine", "X"), ("toe", "")}
 
 
 def torque_limit(dof: str) -> float:

@@ -28,8 +28,8 @@ Example
 >>> from stimuli.motion.generate import GaitParams, generate
 >>> walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.60, fps=30, cycles=2)
 >>> ff = reference_feedforward(walk, fit_body("F", 1.60, 28.1))
->>> ff.torque.shape[1], bool(abs(ff.sample([0.0, 0.5])).max() > 10)    # 28 DoF, N·m
-(28, True)
+>>> ff.torque.shape[1], bool(abs(ff.sample([0.0, 0.5])).max() > 10)    # 30 DoF, N·m
+(30, True)
 """
 
 from __future__ import annotations
@@ -167,14 +167,17 @@ def reference_stance(motion, n_frames: int) -> np.ndarray:
     return down
 
 
-def reference_feedforward(motion, reference_body, rate_hz: float | None = None, toes: bool = False) -> Feedforward:
-    """Feed-forward torques of ``motion`` performed by the ragdoll of ``reference_body``; with
-    ``toes``, of the reference whose feet stand on the floor as a foot without toes can
+def reference_feedforward(motion, reference_body, rate_hz: float | None = None, toes: bool = False,
+                          toe_segment: bool = True) -> Feedforward:
+    """Feed-forward torques of ``motion`` performed by the ragdoll of ``reference_body`` (with toe
+    segments or not: ``toe_segment``, as the simulated ragdoll); with ``toes``, of the reference
+    whose foot boxes stand on their ball where the motion stands on its toes
     (:func:`stimuli.physics.toes.stand_on_toes`), the one the controller then tracks."""
     from stimuli.physics.ragdoll import build_ragdoll, compile_model
     from stimuli.physics.reference import build_reference
 
-    ref, ragdoll = build_reference(motion, reference_body, lambda axes: build_ragdoll(reference_body, None, axes))
+    ref, ragdoll = build_reference(motion, reference_body,
+                                   lambda axes: build_ragdoll(reference_body, None, axes, toes=toe_segment))
     ones = {d: 1.0 for d in ragdoll.dof_names}
     model = compile_model(ragdoll, 1e-3, ones, ones)
     stance = reference_stance(motion, ref.n_frames)

@@ -1,13 +1,17 @@
 """The ragdoll: rigid segments of a fitted body, joints at its rig joints, as MuJoCo MJCF.
 
-Fifteen rigid bodies (the segment table of ``Body.segments``): pelvis (free root), spine, head,
-and per side upper arm, lower arm, hand, upper leg, lower leg, foot. Shapes: capsules for the limbs,
-trunk and pelvis (radius from the segment's mesh volume), a sphere for the head, a box for each
-foot (fitted to the mesh vertices below the ankle) which is the only shape that touches the ground.
-Joints (12, 28 DoF): spine, neck, shoulders, hips and ankles are three hinges each (Euler angles,
-so MuJoCo's PD position actuators apply), elbows and knees one hinge each; the hands are welded to
-the forearms. The paper's ragdoll (Unity) has 10 joints and 22 DoF; we add the two ankles
-(3 DoF each) so that the feet can roll over the ground.
+Seventeen rigid bodies: the fifteen of the segment table of ``Body.segments`` (pelvis (free root),
+spine, head, and per side upper arm, lower arm, hand, upper leg, lower leg, foot) and per side the
+toes. Shapes: capsules for the limbs, trunk and pelvis (radius from the segment's mesh volume), a
+sphere for the head, a box for each foot from the heel to the ball and one for its toes from the
+ball to the tips (fitted to the mesh vertices below the ankle), which are the only shapes that
+touch the ground. Joints (14, 30 DoF): spine, neck, shoulders, hips and ankles are three hinges
+each (Euler angles, so MuJoCo's PD position actuators apply), elbows, knees and toes one hinge
+each; the hands are welded to the forearms. The paper's ragdoll (Unity) has 10 joints and 22 DoF;
+we add the two ankles (3 DoF each) so that the feet can roll over the ground, and the toes, which
+bend at the ball as the foot pushes off (with a rigid foot to the tips, the heel could not rise
+without digging the tips into the floor; ended at the ball, the foot had nothing to stand on
+once the heel was up, and the walks hopped: docs/readme_physics.md, "The ragdoll's toes").
 
 Every body frame is parallel to the world axes in the rest pose and sits at its joint, so a body's
 world rotation *is* the rest-relative global rotation of the motion's bone it stands for
@@ -51,6 +55,13 @@ FOOT_FRICTION = 1.0
 # 5.5–7 mm walking, 95th percentile 8–11 mm; jog landings of the heaviest man 17 mm (0.02:
 # 3.6–4.5, 5–7 and 11 mm).
 CONTACT_SOLREF = "0.03 1.5"
+# Which gaits' ragdolls have toes (``build_ragdoll(toes=)``; ``retarget(toe_segment=)`` overrides).
+# Walks: with the foot box ending at the ball, the base character hopped on CMU 07_12 (0.055 of
+# the walk with no foot down, against 0 in its reference) and on the Poser walk (0.115); with toes
+# 0.014 and 0.037, no walk worse. Jogs keep the box on its ball (stimuli.physics.toes): with toes
+# the Exp-2 women's jog averages stayed down into their flight, 0.14-0.18 of the jog in the air
+# against their reference's 0.21 (0.23-0.25 without) (docs/readme_physics.md, "The ragdoll's toes").
+TOES_BY_GAIT = {"walk": True, "jog": False}
 ARMATURE = 0.01  # kg·m² added to every hinge: keeps light segments stable at a 1 ms step
 
 
@@ -84,7 +95,8 @@ class Link:
         """Anatomical name of the joint at the body's proximal end."""
         base, _, side = self.label.partition(".")
         name = {"spine": "spine", "head": "neck", "upper_arm": "shoulder", "lower_arm": "elbow",
-                "upper_leg": "hip", "lower_leg": "knee", "foot": "ankle", "hand": "wrist", "pelvis": "root"}[base]
+                "upper_leg": "hip", "lower_leg": "knee", "foot": "ankle", "hand": "wrist", "pelvis": "root",
+                "toes": "toe"}[base]
         return f"{name}.{side}" if side else name
 
 
@@ -99,6 +111,11 @@ class Ragdoll:
 
     def link(self, label: str) -> Link:
         return next(k for k in self.links if k.label == label)
+
+    @property
+    def has_toes(self) -> bool:
+        """Whether the feet have toe segments (:func:`toe_link`)."""
+        return any(k.label.startswith("toes.") for k in self.links)
 
     @property
     def dof_names(self) -> list[str]:
@@ -135,22 +152,24 @@ def capsule_radius(volume: float, length: float) -> float:
 def _foot_box(body, ankle: np.ndarray, ball: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centre and half sizes of the box around the mesh vertices below the ankle (sole on y = 0).
 
-    The box ends at the ball of the foot (the toe joint, the foot segment's distal end): the
-    motion's toes bend at push-off while the ragdoll foot is rigid, so a box reaching the toe tips
-    would dig ~6 cm into the floor whenever the heel rises, and the contact would throw the body
-    up (the pelvis bounced ±8 cm).
+    The box ends at the ball of the foot (the toe joint, the foot segment's distal end), where the
+    toes' box (:func:`toe_link`) is hinged: one rigid box reaching the toe tips dug ~6 cm into the
+    floor whenever the heel rose, and the contact threw the body up (the pelvis bounced ±8 cm).
     """
     v = body.vertices
     forward = np.asarray(ball - ankle, float)
     forward[1] = 0.0
     forward /= np.linalg.norm(forward)
-    reach = float((ball - ankle) @ forward)
-    near = (v[:, 1] < ankle[1]) & (np.abs(v[:, 0] - ankle[0]) < 0.12) & (np.abs(v[:, 2] - ankle[2]) < 0.35)
-    near &= (v - ankle) @ forward <= reach
+    near = _below_ankle(v, ankle) & ((v - ankle) @ forward <= (ball - ankle) @ forward)
     lo, hi = v[near].min(0), v[near].max(0)
     lo[1] = 0.0
     hi[1] = ankle[1]
     return (lo + hi) / 2, (hi - lo) / 2
+
+
+def _below_ankle(v: np.ndarray, ankle: np.ndarray) -> np.ndarray:
+    """Mesh vertices of one foot: below its ankle, within 12 cm sideways and 35 cm along."""
+    return (v[:, 1] < ankle[1]) & (np.abs(v[:, 0] - ankle[0]) < 0.12) & (np.abs(v[:, 2] - ankle[2]) < 0.35)
 
 
 def _axis_quat(direction: np.ndarray) -> np.ndarray:
@@ -186,11 +205,13 @@ def _shape(label: str, seg, body, anchor: np.ndarray, rig) -> tuple[dict, np.nda
     return geom, inertia.capsule_inertia(1.0, radius, length / 2), _axis_quat(b - a), radius
 
 
-def build_ragdoll(body, weight_kg: float | None = None, hinge_axes: dict[str, np.ndarray] | None = None) -> Ragdoll:
+def build_ragdoll(body, weight_kg: float | None = None, hinge_axes: dict[str, np.ndarray] | None = None,
+                  toes: bool = True) -> Ragdoll:
     """The ragdoll of a fitted ``stimuli.bodies.Body`` with Table-1 masses for ``weight_kg``.
 
     ``weight_kg`` defaults to the body's own mass; ``hinge_axes`` maps ``lower_leg.L`` … to a
-    unit axis (world, rest pose) for the elbows and knees (default: the body's +x, its left).
+    unit axis (world, rest pose) for the elbows and knees (default: the body's +x, its left);
+    ``toes``: the feet get toe segments (:func:`toe_link`; :data:`TOES_BY_GAIT`).
     """
     weight = float(body.anthropometry.mass_kg if weight_kg is None else weight_kg)
     height = float(body.anthropometry.height_m)
@@ -208,7 +229,40 @@ def build_ragdoll(body, weight_kg: float | None = None, hinge_axes: dict[str, np
             axis = axis / np.linalg.norm(axis)
         links.append(Link(label, parent, kind, anchor, bone, euler, masses[label], geom,
                           unit_inertia * masses[label].mass_kg, iquat, axis))
+    if toes:
+        links += [toe_link(body, next(k for k in links if k.label == f"foot.{s}"), s) for s in "LR"]
     return Ragdoll(links, weight, height, body.body_id)
+
+
+def toe_link(body, foot: Link, side: str) -> Link:
+    """The toes of one side: a box around the mesh vertices ahead of the ball (sole on y = 0), hinged
+    at the ball about the foot's lateral axis (level, square to the heel–ball line).
+
+    Table 1 gives one mass for the whole foot; it is split between the foot and its toes in
+    proportion to their boxes' volumes, keeping the whole foot's centre of mass, so the body's mass
+    and centre of mass (and the balance factor b) are as without the split. ``foot`` (the foot's
+    link, the toes' parent) is given its share here.
+    """
+    seg = {s.label: s for s in body.segments}[f"foot.{side}"]
+    ankle, ball = np.asarray(seg.proximal, float), np.asarray(seg.distal, float)
+    forward = ball - ankle
+    forward[1] = 0.0
+    forward /= np.linalg.norm(forward)
+    v = body.vertices
+    ahead = _below_ankle(v, ankle) & ((v - ankle) @ forward > (ball - ankle) @ forward)
+    lo, hi = v[ahead].min(0), v[ahead].max(0)
+    lo[1] = 0.0
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    whole = foot.mass
+    toe_kg = whole.mass_kg * float(np.prod(half) / (np.prod(half) + np.prod(foot.geom["size"])))
+    foot_kg = whole.mass_kg - toe_kg
+    foot.mass = dataclasses.replace(whole, mass_kg=foot_kg, com=(whole.mass_kg * whole.com - toe_kg * centre) / foot_kg)
+    foot.inertia = inertia.box_inertia(foot_kg, foot.geom["size"])
+    toes = dataclasses.replace(whole, label=f"toes.{side}", mass_kg=toe_kg, com=centre, com_geometric=centre)
+    axis = np.cross([0.0, 1.0, 0.0], forward)
+    return Link(f"toes.{side}", f"foot.{side}", "hinge", ball, None, None, toes,
+                {"type": "box", "size": half, "pos": centre - ball}, inertia.box_inertia(toe_kg, half),
+                np.array([1.0, 0.0, 0.0, 0.0]), axis / np.linalg.norm(axis))
 
 
 def _fmt(values) -> str:
@@ -218,7 +272,7 @@ def _fmt(values) -> str:
 def _geom_xml(link: Link) -> str:
     g = link.geom
     where = f'fromto="{_fmt(g["fromto"])}"' if "fromto" in g else f'pos="{_fmt(g["pos"])}"'
-    if link.label.startswith("foot"):
+    if link.label.startswith(("foot", "toes")):
         # Only the feet collide (with the floor); friction as on a belt or floor.
         contact = f'contype="2" conaffinity="1" friction="{FOOT_FRICTION} 0.02 0.002" solref="{CONTACT_SOLREF}"'
     else:

@@ -125,6 +125,14 @@ def segment_rotations(motion, body) -> tuple[dict[str, np.ndarray], dict[str, in
         rotations[label] = quat.unroll(quat.mul(grot[:, j], al))
         bones[label] = j
         align[label] = al
+    for s, r in SIDE.items():
+        # The toes follow the toe bone, aligned as their foot: a toe bone has no distal joint of
+        # its own to take a direction from in many rigs (End Sites), and it lies along the foot at
+        # rest. A toe-less rig's toe is its ankle's End Site, which turns with the ankle: toes straight.
+        j = roles[f"{r}_toe"]
+        rotations[f"toes.{s}"] = quat.unroll(quat.mul(grot[:, j], align[f"foot.{s}"]))
+        bones[f"toes.{s}"] = j
+        align[f"toes.{s}"] = align[f"foot.{s}"]
     return rotations, bones, align
 
 
@@ -267,6 +275,8 @@ def build_reference(motion, body, ragdoll_factory) -> tuple[Reference, object]:
         parent = label.replace("lower", "upper")
         axes[label] = hinge_axis(relative_rotation(rotations, label, parent))
     ragdoll = ragdoll_factory(axes)
+    labels = {link.label for link in ragdoll.links}
+    rotations, bones, align = ({k: v for k, v in d.items() if k in labels} for d in (rotations, bones, align))
     cols = []
     for link in ragdoll.links:
         if link.kind == "ball":

@@ -23,7 +23,7 @@ from stimuli.errors import StimuliError
 from stimuli.physics import inertia
 from stimuli.physics.controller import Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit, torque_limit_sourced
 from stimuli.physics.output import joint_rms_difference, to_motion
-from stimuli.physics.ragdoll import build_ragdoll, compile_model
+from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
 from stimuli.physics.simulate import DEFAULT_RATE_HZ, simulate
 
@@ -42,12 +42,14 @@ class RetargetResult:
 
 
 def prepare(motion, body, weight_kg: float | None = None, gains: Gains | None = None,
-            rate_hz: float = DEFAULT_RATE_HZ):
+            rate_hz: float = DEFAULT_RATE_HZ, toe_segment: bool | None = None):
     """Reference targets, ragdoll and compiled model with the fixed gains (no simulation yet).
 
-    ``gains`` default: the shipped set of the motion's gait (:func:`motion_gait`)."""
+    ``gains`` default: the shipped set of the motion's gait (:func:`motion_gait`); ``toe_segment``
+    default: the gains' gait's (:data:`stimuli.physics.ragdoll.TOES_BY_GAIT`)."""
     gains = gains or Gains.load(gait=motion_gait(motion))
-    ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, weight_kg, axes))
+    toes = TOES_BY_GAIT[gains.gait] if toe_segment is None else bool(toe_segment)
+    ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, weight_kg, axes, toes=toes))
     kp, kd = gains.joint_gains(ragdoll.dof_names)
     model = compile_model(ragdoll, 1.0 / rate_hz, kp, kd)
     set_joint_gains(model, kp, kd)
@@ -318,7 +320,7 @@ def on_reference_rig(motion, reference_body):
 def retarget(motion, body, weight_kg: float | None = None, reference_body=None, gains: Gains | None = None,
              min_simulated_s: float = 4.0, rate_hz: float = DEFAULT_RATE_HZ, raise_on_fall: bool = False,
              feedforward: bool = False, torque_limits: bool = False, swing_placement: bool | None = None,
-             toes: bool | None = None) -> RetargetResult:
+             toes: bool | None = None, toe_segment: bool | None = None) -> RetargetResult:
     """Physics-based retargeting of ``motion`` onto ``body`` with Table-1 masses for ``weight_kg``.
 
     ``reference_body`` is the body the motion belongs to (for the balance factor b; default the
@@ -335,6 +337,8 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     the world as the reference places it (:mod:`stimuli.physics.swing`). ``toes`` (default: with
     the feed-forward, on runs): where the motion stands on its toes, the reference's toe-less foot
     box stands on its ball (:mod:`stimuli.physics.toes`), for the PD and the feed-forward alike.
+    ``toe_segment`` (default: on walks, :data:`stimuli.physics.ragdoll.TOES_BY_GAIT`): the ragdoll's
+    feet have toes hinged at the ball that follow the motion's toe bend.
     An overground capture is looped first (:func:`loop_input`), one above 30 fps is simulated from
     about 30 fps (:func:`at_reference_rate`; the COM motion comes back at its own rate and frame
     count), and a capture is retargeted onto the reference body's rig (:func:`on_reference_rig`);
@@ -346,7 +350,7 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     given_fps, given_frames = motion.fps, motion.n_frames
     motion, resampled = at_reference_rate(motion)
     motion, onto_rig_here = on_reference_rig(motion, reference_body or body)
-    ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz)
+    ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz, toe_segment)
     if swing_placement is None:
         swing_placement = bool(feedforward) and motion_gait(motion) == "walk"
     toes = bool(feedforward) and motion_gait(motion) != "walk" if toes is None else bool(toes)
@@ -365,7 +369,7 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     if feedforward:
         from stimuli.physics.feedforward import reference_feedforward
 
-        ff = reference_feedforward(motion, reference_body or body, toes=toes)
+        ff = reference_feedforward(motion, reference_body or body, toes=toes, toe_segment=ragdoll.has_toes)
     warmup_loops = max(1, int(np.ceil(min_simulated_s / ref.period - 1.0 - 1e-9)))
     sim = simulate(model, ref, gains, warmup_loops=warmup_loops, rate_hz=rate_hz, feedforward=ff,
                    swing_stance=stance if swing_placement else None)
@@ -375,7 +379,8 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
         nocom = joint_rms_difference(motion, out, ref, ragdoll)
     report = build_report(sim, ragdoll, body, reference_body or body, weight, gains, nocom)
     report["controller"] = {"feedforward": bool(feedforward), "torque_limits": bool(torque_limits),
-                            "swing_placement": bool(swing_placement), "toes": toes}
+                            "swing_placement": bool(swing_placement), "toes": toes,
+                            "toe_segment": ragdoll.has_toes}
     if toe_changes is not None:
         report["reference_on_toes"] = toe_changes
     report["reference_flight_fraction"] = reference_flight_fraction(motion)

@@ -91,7 +91,7 @@ def ground_offset(model, ref, n: int = 60) -> float:
     """Vertical shift (m) that puts the lowest foot points over the clip on the floor.
 
     Poses the model kinematically at ``n`` instants of the reference and takes, per instant, the
-    lowest corner of the two foot boxes; the 10th percentile of those minima goes to y = 0. A
+    lowest corner of the feet's boxes (feet and toes); the 10th percentile of those minima goes to y = 0. A
     reference that carries the floor in its root already (``ref.grounded``, :mod:`stimuli.physics.toes`)
     needs no shift.
     """
@@ -102,7 +102,7 @@ def ground_offset(model, ref, n: int = 60) -> float:
 
     data = mujoco.MjData(model)
     dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
-    feet = [g for g in range(model.ngeom) if model.geom(g).name.startswith("foot")]
+    feet = [g for side in foot_geoms(model) for g in side]
     target = ref.sample(np.linspace(0, ref.period, n, endpoint=False))
     lows = []
     for i in range(n):
@@ -112,6 +112,16 @@ def ground_offset(model, ref, n: int = 60) -> float:
         mujoco.mj_kinematics(model, data)
         lows.append(min(lowest_corner(model, data, g) for g in feet))
     return -float(np.percentile(lows, 10))
+
+
+def foot_geoms(model) -> list[list[int]]:
+    """Per side (L, R): the geoms of the foot and of its toes where it has them, the ragdoll's only
+    shapes that touch the floor."""
+    import mujoco
+
+    ids = [[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{part}.{side}") for part in ("foot", "toes")]
+           for side in "LR"]
+    return [[g for g in side if g >= 0] for side in ids]
 
 
 def lowest_corner(model, data, geom: int) -> float:
@@ -152,7 +162,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
     pelvis = model.body("pelvis").id
     trunk = model.body("spine").id
-    foot_geoms = [model.geom(f"foot.{s}").id for s in "LR"]
+    feet = foot_geoms(model)
     _initial_state(model, data, target, dof_adr)
     tau_ff = None
     if feedforward is not None:
@@ -192,7 +202,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         forces[i] = data.actuator_force
         if data.ncon:
             geoms = data.contact.geom[: data.ncon]
-            contact[i] = [np.any(geoms == g) for g in foot_geoms]
+            contact[i] = [np.isin(geoms, side).any() for side in feet]
         if i % k == 0:
             reason = _fall_reason(data, pelvis, trunk, target, i, target_height[i])
             if reason:

@@ -99,12 +99,12 @@ def swing_placement(model, ref, stance: np.ndarray, lift: float) -> SwingPlaceme
     import mujoco
 
     from stimuli.physics.feedforward import periodic_lowpass
-    from stimuli.physics.simulate import lowest_corner
+    from stimuli.physics.simulate import foot_geoms, lowest_corner
 
     data = mujoco.MjData(model)
     qadr = actuator_qpos(model)
     bodies = [model.body(f"foot.{s}").id for s in "LR"]
-    geoms = [model.geom(f"foot.{s}").id for s in "LR"]
+    geoms = foot_geoms(model)
     n = ref.n_frames
     pos, rot = np.zeros((n, 2, 3)), np.zeros((n, 2, 4))
     for f in range(n):
@@ -115,7 +115,7 @@ def swing_placement(model, ref, stance: np.ndarray, lift: float) -> SwingPlaceme
         for side in range(2):
             pos[f, side] = data.xpos[bodies[side]]
             rot[f, side] = data.xquat[bodies[side]]
-            pos[f, side, 1] -= min(0.0, lowest_corner(model, data, geoms[side]))
+            pos[f, side, 1] -= min(0.0, *(lowest_corner(model, data, g) for g in geoms[side]))
     pos = periodic_lowpass(pos.reshape(n, 6), ref.fps, CUTOFF_HZ).reshape(n, 2, 3)
     return SwingPlacement(float(ref.fps), swing_weights(stance, ref.fps), pos, rot, ref.root_pos[:, 2].copy())
 

@@ -28,7 +28,7 @@ from scipy.optimize import minimize_scalar
 
 from stimuli.physics.checks import TRACKING_BOUND_DEG, flight_excess
 from stimuli.physics.controller import GAINS_FILE, GAITS, Gains, gait_key, inertia_profile, save_gains, set_joint_gains
-from stimuli.physics.ragdoll import build_ragdoll, compile_model
+from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
 from stimuli.physics.retarget import tracking_rms
 from stimuli.physics.simulate import simulate
@@ -110,10 +110,12 @@ def tune(gait: str = "walk", target_rms_deg: float = TARGET_RMS_DEG, max_evals: 
     gait = gait_key(gait)
     base = BASES[gait]
     body, motion = base_setup(base)
-    ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, None, axes))
+    ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, None, axes, toes=TOES_BY_GAIT[gait]))
     ones = {d: 1.0 for d in ragdoll.dof_names}
     model = compile_model(ragdoll, 1e-3, ones, ones)
     profile = inertia_profile(model)
+    if not ragdoll.has_toes:   # so that toe segments can be asked for on this gait too (retarget(toe_segment=True))
+        profile.update(toe_profile(body))
     root = root_gains(float(body.anthropometry.mass_kg))
     history = []
     k_p = 500.0
@@ -146,6 +148,13 @@ def tune(gait: str = "walk", target_rms_deg: float = TARGET_RMS_DEG, max_evals: 
                     "evaluations": len(history), "history": history}
     gains.base = dict(base, body_id=body.body_id, weight_kg=float(body.anthropometry.mass_kg))
     return gains
+
+
+def toe_profile(body) -> dict[str, float]:
+    """The toe DoFs' entries of the inertia profile of ``body``'s ragdoll with toe segments."""
+    ragdoll = build_ragdoll(body, None, None, toes=True)
+    ones = {d: 1.0 for d in ragdoll.dof_names}
+    return {d: v for d, v in inertia_profile(compile_model(ragdoll, 1e-3, ones, ones)).items() if d.startswith("toe.")}
 
 
 def tune_gaits(gaits=GAITS, target_rms_deg: float = TARGET_RMS_DEG, out: Path | None = GAINS_FILE,
