@@ -162,7 +162,9 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
     pelvis = model.body("pelvis").id
     trunk = model.body("spine").id
-    feet = foot_geoms(model)
+    side_of_geom = np.full(model.ngeom, -1)      # 0 left foot or toes, 1 right, -1 neither
+    for side, geoms in enumerate(foot_geoms(model)):
+        side_of_geom[geoms] = side
     _initial_state(model, data, target, dof_adr)
     tau_ff = None
     if feedforward is not None:
@@ -201,8 +203,8 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
             break
         forces[i] = data.actuator_force
         if data.ncon:
-            geoms = data.contact.geom[: data.ncon]
-            contact[i] = [np.isin(geoms, side).any() for side in feet]
+            sides = side_of_geom[data.contact.geom[: data.ncon]]
+            contact[i] = [(sides == 0).any(), (sides == 1).any()]
         if i % k == 0:
             reason = _fall_reason(data, pelvis, trunk, target, i, target_height[i])
             if reason:
