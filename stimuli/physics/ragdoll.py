@@ -2,7 +2,8 @@
 
 Seventeen rigid bodies: the fifteen of the segment table of ``Body.segments`` (pelvis (free root),
 spine, head, and per side upper arm, lower arm, hand, upper leg, lower leg, foot) and per side the
-toes. Shapes: capsules for the limbs, trunk and pelvis (radius from the segment's mesh volume), a
+toes (a walk's ragdoll; a jog's feet end at the ball, :data:`TOES_BY_GAIT`: fifteen bodies, 12
+joints, 28 DoF). Shapes: capsules for the limbs, trunk and pelvis (radius from the segment's mesh volume), a
 sphere for the head, a box for each foot from the heel to the ball and one for its toes from the
 ball to the tips (fitted to the mesh vertices below the ankle), which are the only shapes that
 touch the ground. Joints (14, 30 DoF): spine, neck, shoulders, hips and ankles are three hinges
