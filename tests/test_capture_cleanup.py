@@ -264,3 +264,32 @@ def test_a_foot_rises_no_further_than_upright():
     ball = np.array([[[0.0, -0.14, 0.05]]])               # ankle-relative
     moved, _ = rise_heel(np.array([[0.0, 0.75, -0.3]]), ankle, ball, np.array([[1.0, 0, 0, 0]]), 0.6, np.array([0]))
     assert moved[0, 2] == pytest.approx(ankle[0, 2] + ball[0, 0, 2], abs=1e-6)
+
+
+def test_a_contact_broken_inside_its_stance_is_one_contact(body, monkeypatch):
+    """The contact model reads a jittering marker's fast frames in mid-stance as a lift-off (the
+    hold-out Poser walk: 1.0 m/s over the belt between frames at 0.3-0.5, a 3-frame break of which
+    the near-ground growth restored two); between heel strike and toe off the foot stays planted,
+    or the clean-up lifted it 30 mm for the frame left."""
+    import stimuli.motion.retarget as retarget_module
+
+    source = capture_loop(read_bvh(MOCAP / "cmu_35_01_walk.bvh"), "walk").resample(30.0)
+    motion = retarget(source, body, cleanup=False)
+    want = retarget_module.planted(motion, body)
+    broken = {}
+    for s in "lr":
+        shift, runs = retarget_module.contact_runs(want[s], True)
+        start, stop = max(runs, key=lambda r: r[1] - r[0])
+        assert stop - start >= 12, (s, runs)
+        broken[s] = (shift + (start + stop) // 2 + np.arange(-2, 2)) % len(want[s])   # 4 frames mid-stance
+    model, sides = retarget_module.contact_mask, iter("lr")   # planted reads the left foot, then the right
+
+    def jittered(*args, **kwargs):
+        c = model(*args, **kwargs)
+        c[broken[next(sides)]] = False
+        return c
+
+    monkeypatch.setattr(retarget_module, "contact_mask", jittered)
+    got = retarget_module.planted(motion, body)
+    for s in "lr":
+        assert (got[s] == want[s]).all(), s

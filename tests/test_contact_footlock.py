@@ -218,3 +218,25 @@ def test_motion_retarget_prints_the_joint_change(tmp_path, capsys):
     err = capsys.readouterr().err
     meta = Motion.load(tmp_path / "r.npz").metadata
     assert f"largest {meta['joint_change_max_deg']:.1f}°" in err and meta["foot_locked"]
+
+
+def test_a_creeping_foot_gets_its_footprint_where_it_is_on_average():
+    """A capture's planted foot that creeps 5 cm forward over its contact: anchored where it landed
+    (the generator's footprints) the whole creep is corrected at toe off; centred (a capture's) the
+    correction is shared, its mean over the contact zero, the same shape either way."""
+    from stimuli.motion.footfix import contact_targets
+
+    t_n, fps = 40, 30.0
+    contact = np.zeros(t_n, bool)
+    contact[10:30] = True
+    ankle = np.zeros((t_n, 3))
+    ankle[:, 1] = 0.08
+    ankle[:, 2] = np.interp(np.arange(t_n), [10, 29], [0.0, 0.05])
+    sole = ankle[:, None, :] + np.array([[0.0, -0.08, -0.05], [0.0, -0.08, 0.12], [0.0, -0.08, 0.18]])
+    kept, _, _ = contact_targets(sole, ankle, contact, np.zeros(3), fps, cyclic=False)
+    centred, _, _ = contact_targets(sole, ankle, contact, np.zeros(3), fps, cyclic=False, centre=True)
+    kept_fix, centred_fix = (kept - ankle)[contact, 2], (centred - ankle)[contact, 2]
+    assert kept_fix[0] == pytest.approx(0.0, abs=1e-12) and kept_fix[-1] == pytest.approx(-0.05)
+    assert centred_fix.mean() == pytest.approx(0.0, abs=1e-12)
+    assert centred_fix[0] == pytest.approx(0.025) and centred_fix[-1] == pytest.approx(-0.025)
+    assert np.allclose(centred_fix - centred_fix[0], kept_fix)

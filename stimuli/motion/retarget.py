@@ -427,9 +427,30 @@ def planted(motion: Motion, body) -> dict[str, np.ndarray]:
         flat = np.median(low[stance[s]]) if stance[s].any() else np.percentile(low, 2)
         near = low - flat < STANCE_HEIGHT_M
         model = contact_mask(sole, motion.fps, belt_speed, flat, cyclic=looped)
-        c = stance[s] & near & model if stance[s].any() else model
+        c = _unbroken_in_stance(stance[s] & near & model, stance[s], looped) if stance[s].any() else model
         out[s] = _dilate_near_ground(c, sole[:, :, 1].min(axis=1), looped)
     return out
+
+
+def _unbroken_in_stance(contact: np.ndarray, stance: np.ndarray, cyclic: bool) -> np.ndarray:
+    """``contact`` with every break inside one stance (heel strike to toe off) closed: between its
+    first and last contact frame of a stance the foot is down. A foot does not lift and land again
+    within its own stance; a break there is the contact model reading a marker's jitter as speed
+    (the hold-out Poser walk: one 30-fps frame at 1.0 m/s over the belt in mid-stance, between
+    frames at 0.3-0.5). The clean-up lifted that foot 30 mm for the frame, and the physics step's
+    ragdoll left the floor with it.
+
+    >>> stance = np.array([0, 1, 1, 1, 1, 1, 0, 0], bool)
+    >>> _unbroken_in_stance(np.array([0, 1, 1, 0, 1, 0, 0, 0], bool), stance, False).astype(int).tolist()
+    [0, 1, 1, 1, 1, 0, 0, 0]
+    """
+    shift, runs = contact_runs(stance, cyclic)
+    c = np.roll(contact, -shift)
+    for start, stop in runs:
+        down = np.flatnonzero(c[start:stop])
+        if len(down):
+            c[start + down[0]:start + down[-1] + 1] = True
+    return np.roll(c, shift)
 
 
 def _dilate_near_ground(contact: np.ndarray, low: np.ndarray, cyclic: bool, height: float = NEAR_GROUND_M) -> np.ndarray:
@@ -467,19 +488,21 @@ def cleanup_feet(motion: Motion, body, balance_root: bool = True, foot_lock: boo
     known = m.metadata.get("contacts")
     if known and all(len(known.get(s, [])) == m.n_frames for s in ("l", "r")):
         contact = {s: np.asarray(known[s], bool) for s in ("l", "r")}  # e.g. the generator's stance phases
+        centre = False   # footprints a motion brings with its contacts stay where they were laid
     else:
         contact = planted(m, body)
+        centre = True    # a capture's footprints are centred on its creeping feet (clean_feet)
     belt = float(m.metadata.get("belt_speed_mps", 0.0)) if m.metadata.get("treadmill") else 0.0
     cyclic = bool(m.metadata.get("looped"))
     out = clean_feet(m, contact, belt_speed=belt, cyclic=cyclic, points=pts, clearance_m=0.03, iterations=3,
-                     bend_toes=True)
+                     bend_toes=True, centre_footprints=centre)
     walking = bool(np.all(contact["l"] | contact["r"]))
     if cyclic and balance_root and walking:
         # Move the pelvis so the ZMP follows the feet, then re-plant the feet where they were
         # (walks only: with a flight phase the cart-table model has no support to follow).
         balanced = balance(out, contact, points=pts)
         out = clean_feet(balanced, contact, belt_speed=belt, cyclic=True, points=pts, clearance_m=0.03, iterations=3,
-                         reference=out, bend_toes=True)
+                         reference=out, bend_toes=True, centre_footprints=centre)
     out = ease_edges(out, contact, belt_speed=belt, cyclic=cyclic)
     out = keep_knee_rate(out, m, contact, pts, cyclic=cyclic, bend_toes=True)
     if foot_lock:
