@@ -293,3 +293,17 @@ def test_a_contact_broken_inside_its_stance_is_one_contact(body, monkeypatch):
     got = retarget_module.planted(motion, body)
     for s in "lr":
         assert (got[s] == want[s]).all(), s
+
+
+@pytest.mark.parametrize("name,gait", [("more/cmu_131_02_start_walk_stop_maxnames_120fps.bvh", "walk"),
+                                       ("cmu_35_17_run.bvh", "jog")])
+def test_a_walks_planted_feet_leave_no_frame_in_the_air(body, name, gait):
+    """CMU 131_02's 0.3 m/s shuffle read both feet up for 3 of its 37 frames (Zeni's events and the
+    contact model agree); a walk has no flight, so the foot that was down stays down until the other
+    lands. A run keeps its flight."""
+    from stimuli.motion.retarget import planted
+
+    motion = retarget(capture_loop(read_bvh(MOCAP / name), gait).resample(30.0), body, cleanup=False)
+    contact = planted(motion, body)
+    airborne = ~(contact["l"] | contact["r"])
+    assert (not airborne.any()) if gait == "walk" else airborne.mean() > 0.2

@@ -429,7 +429,46 @@ def planted(motion: Motion, body) -> dict[str, np.ndarray]:
         model = contact_mask(sole, motion.fps, belt_speed, flat, cyclic=looped)
         c = _unbroken_in_stance(stance[s] & near & model, stance[s], looped) if stance[s].any() else model
         out[s] = _dilate_near_ground(c, sole[:, :, 1].min(axis=1), looped)
+    if motion.metadata.get("gait") == "walk":
+        out = _double_support(out, looped)
     return out
+
+
+def _double_support(contact: dict[str, np.ndarray], cyclic: bool) -> dict[str, np.ndarray]:
+    """A walk's contacts with no frame where neither foot is down: through such frames the foot that
+    was down last stays down (a later toe off) until the other lands. A walk has no flight (the
+    loop is labelled a walk only where the capture's steady range flies too little to be a run),
+    and a shuffle's events misplace toe off: CMU 131_02 at 0.3 m/s read both feet up for 3 of its
+    37 frames, by Zeni's events as well as by the contact model; the clean-up lifted both feet 15
+    mm or more there, and the physics step's ragdoll flew 9.6 % against its reference's 5.7 %.
+
+    >>> c = {"l": np.array([1, 1, 0, 0, 0, 0, 1, 1], bool), "r": np.array([0, 0, 0, 0, 1, 1, 1, 0], bool)}
+    >>> {s: v.astype(int).tolist() for s, v in _double_support(c, True).items()}
+    {'l': [1, 1, 1, 1, 0, 0, 1, 1], 'r': [0, 0, 0, 0, 1, 1, 1, 0]}
+    """
+    out = {s: c.copy() for s, c in contact.items()}
+    down = out["l"] | out["r"]
+    if down.all() or not down.any():
+        return out
+    n = len(down)
+    first = int(np.argmax(down))
+    for t in (first + np.arange(n)) % n if cyclic else range(first, n):
+        if out["l"][t] or out["r"][t]:
+            continue
+        before = (t - 1) % n
+        held = [s for s in ("l", "r") if out[s][before]]
+        # Both were down and both lift (a hop, not a walk): hold the one down longer, the trailing foot.
+        side = max(held, key=lambda s: _run_back(out[s], before, cyclic))
+        out[side][t] = True
+    return out
+
+
+def _run_back(contact: np.ndarray, t: int, cyclic: bool) -> int:
+    """How many frames ``contact`` has been down up to and including frame ``t``."""
+    k = 0
+    while k < len(contact) and (cyclic or t - k >= 0) and contact[(t - k) % len(contact)]:
+        k += 1
+    return k
 
 
 def _unbroken_in_stance(contact: np.ndarray, stance: np.ndarray, cyclic: bool) -> np.ndarray:
