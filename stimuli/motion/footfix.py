@@ -6,9 +6,10 @@ a horizontal anchor that moves backwards with the treadmill belt (zero overgroun
 lowest point changes (heel → ball during roll-over) the new point is anchored where it is, so the
 foot rolls instead of sliding (a capture's footprint then moves to where its foot is on average
 over the contact: ``clean_feet(centre_footprints=)``). The ankle target that results is reached
-with analytic two-bone IK on hip and knee (Holden's formulation), keeping the foot's orientation. If a target is out of
-reach the heel rises about the planted ball or toe (:func:`rise_heel`), and only then is the
-pelvis lowered just enough (smoothly, over the loop); a swinging foot comes down with the pelvis.
+with analytic two-bone IK on hip and knee (Holden's formulation), keeping the foot's orientation.
+If a target is out of reach the heel rises about the planted ball or toe (:func:`rise_heel`), and
+only then is the pelvis lowered just enough (smoothly, over the loop); a swinging foot comes down
+with the pelvis.
 
 The knee is left to the source wherever the feet allow it: near full extension 1 cm of
 hip-to-ankle distance is about 18° of knee, so pinning a foot at the source's pitch straightened

@@ -409,7 +409,9 @@ def planted(motion: Motion, body) -> dict[str, np.ndarray]:
     to two frames before heel strike where the foot is already near the ground; where a foot has no
     events, the contact model alone. Zeni's toe off comes late on real captures: the foot stayed
     pinned while its toes already slid forward (Bandai dash 16.7 % skate, now 5.6 % with that alone)
-    and was let go with the knee straightened (CC4 07_12: 11° → 47° in one 60-fps frame)."""
+    and was let go with the knee straightened (CC4 07_12: 11° → 47° in one 60-fps frame).
+    A contact is not broken inside its stance (:func:`_unbroken_in_stance`), and a walk's contacts
+    leave no frame with neither foot down (:func:`_double_support`)."""
     grot, gpos = motion.global_transforms()
     pts = mesh_sole_points(body)
     belt_speed = float(motion.metadata.get("belt_speed_mps", 0.0)) if motion.metadata.get("treadmill") else 0.0
