@@ -176,9 +176,7 @@ def apply_root_wrench(data, gains: Gains, target: dict, i: int, pelvis: int) -> 
     (``xfrc_applied`` would put the force at the segment's CoM, a few cm away: with the damping at
     the origin that leaves a spurious couple of about k_df·v̄·r ≈ 50 N·m.)
     """
-    wrench = root_wrench(gains, data.qpos[:3], data.qpos[3:7], target, i)
-    data.qfrc_applied[0:3] = wrench[:3]
-    data.qfrc_applied[3:6] = data.xmat[pelvis].reshape(3, 3).T @ wrench[3:]
+    RootWrench(gains, target).apply(data, i, pelvis)
 
 
 def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarray:
@@ -188,15 +186,38 @@ def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarra
     act through the free joint's implicit damping (:func:`set_root_damping`). Uses MuJoCo's
     quaternion helpers: this runs every simulation step, scipy's are 20× slower.
     """
-    import mujoco
+    return RootWrench(gains, target)(pos, quat_wxyz, i)
 
-    force = gains.k_pf * (target["root_pos"][i] - pos) + gains.k_df * target["root_vel"][i]
-    inv, err_q, err = np.empty(4), np.empty(4), np.empty(3)
-    mujoco.mju_negQuat(inv, quat_wxyz)
-    mujoco.mju_mulQuat(err_q, target["root_quat"][i], inv)
-    mujoco.mju_quat2Vel(err, err_q, 1.0)
-    torque = gains.k_pr * err + gains.k_dr * target["root_omega"][i]
-    return np.concatenate([force, torque])
+
+class RootWrench:
+    """:func:`root_wrench` for one simulation, with its targets and buffers bound once: the
+    simulation loop calls it every step (17 000 times in a 4-s walk), where a dictionary lookup
+    and four small allocations per call were a tenth of the step's time. Same arithmetic, same
+    results to the bit."""
+
+    def __init__(self, gains: Gains, target: dict):
+        import mujoco
+
+        self.k_pf, self.k_df, self.k_pr, self.k_dr = gains.k_pf, gains.k_df, gains.k_pr, gains.k_dr
+        self.pos, self.vel = target["root_pos"], target["root_vel"]
+        self.quat, self.omega = target["root_quat"], target["root_omega"]
+        self.inv, self.err_q, self.err = np.empty(4), np.empty(4), np.empty(3)
+        self.wrench = np.empty(6)
+        self.neg, self.mul, self.to_vel = mujoco.mju_negQuat, mujoco.mju_mulQuat, mujoco.mju_quat2Vel
+
+    def __call__(self, pos, quat_wxyz, i: int) -> np.ndarray:
+        self.wrench[:3] = self.k_pf * (self.pos[i] - pos) + self.k_df * self.vel[i]
+        self.neg(self.inv, quat_wxyz)
+        self.mul(self.err_q, self.quat[i], self.inv)
+        self.to_vel(self.err, self.err_q, 1.0)
+        self.wrench[3:] = self.k_pr * self.err + self.k_dr * self.omega[i]
+        return self.wrench
+
+    def apply(self, data, i: int, pelvis: int) -> None:
+        """:func:`apply_root_wrench` with this simulation's targets."""
+        wrench = self(data.qpos[:3], data.qpos[3:7], i)
+        data.qfrc_applied[0:3] = wrench[:3]
+        data.qfrc_applied[3:6] = data.xmat[pelvis].reshape(3, 3).T @ wrench[3:]
 
 
 # Actuator torque limits (N·m), the same for every body (fat mass adds no muscle), per joint and
