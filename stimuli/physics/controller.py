@@ -157,7 +157,7 @@ def set_root_damping(model, gains: Gains) -> None:
     ``xfrc_applied`` (first version) the root's ``k_dr`` sat near the explicit stability limit
     of the light pelvis at a 1-ms step, and the chattering root pumped the ragdoll into hopping
     (about a third of each walk with no foot on the floor). The reference-velocity parts
-    ``k_df v̄`` and ``k_dr ω̄`` do not depend on the state and stay in :func:`root_wrench`. The
+    ``k_df v̄`` and ``k_dr ω̄`` do not depend on the state and stay in :class:`RootWrench`. The
     damping is isotropic, so the free joint's local angular velocity gives the same torque as
     the world one.
     """
@@ -179,21 +179,16 @@ def apply_root_wrench(data, gains: Gains, target: dict, i: int, pelvis: int) -> 
     RootWrench(gains, target).apply(data, i, pelvis)
 
 
-def root_wrench(gains: Gains, pos, quat_wxyz, target: dict, i: int) -> np.ndarray:
-    """World force and torque (6,) on the pelvis for step ``i`` of the sampled targets.
+class RootWrench:
+    """World force and torque (6,) on the pelvis at step ``i`` of one simulation's sampled targets.
 
     ``k_pf (p̄ − p) + k_df v̄`` and ``k_pr θ(R̄ Rᵀ) + k_dr ω̄``; the ``−k_df v``, ``−k_dr ω`` terms
     act through the free joint's implicit damping (:func:`set_root_damping`). Uses MuJoCo's
-    quaternion helpers: this runs every simulation step, scipy's are 20× slower.
-    """
-    return RootWrench(gains, target)(pos, quat_wxyz, i)
-
-
-class RootWrench:
-    """:func:`root_wrench` for one simulation, with its targets and buffers bound once: the
+    quaternion helpers (scipy's are 20× slower), with the targets and buffers bound once: the
     simulation loop calls it every step (17 000 times in a 4-s walk), where a dictionary lookup
-    and four small allocations per call were a tenth of the step's time. Same arithmetic, same
-    results to the bit."""
+    and four small allocations per call were a tenth of the step's time. The returned array is
+    this object's buffer, overwritten by the next call.
+    """
 
     def __init__(self, gains: Gains, target: dict):
         import mujoco

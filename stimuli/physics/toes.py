@@ -75,7 +75,7 @@ def stand_on_toes(ref, model, stance: np.ndarray):
     largest raise in mm)."""
     import mujoco
 
-    from stimuli.physics.simulate import ground_offset
+    from stimuli.physics.simulate import foot_geoms, ground_offset
     from stimuli.physics.swing import actuator_qpos, leg_dofs
 
     root = ref.root_pos + [0.0, ground_offset(model, ref), 0.0]
@@ -110,7 +110,8 @@ def stand_on_toes(ref, model, stance: np.ndarray):
             solve_leg_at(model, data, qadr[legs[side]], dofs[side], body, data.xpos[body].copy(), goal_rot)
         q[f] = data.qpos[qadr]
     lowered = _lower_heels(model, data, pose, q, qadr, legs, dofs, feet, stance & ~late)
-    toe_bend = _lay_toes_flat(model, data, pose, q, qadr) if _has_toes(model) else np.zeros((len(q), 2))
+    has_toes = len(foot_geoms(model)[0]) > 1
+    toe_bend = _lay_toes_flat(model, data, pose, q, qadr) if has_toes else np.zeros((len(q), 2))
     raise_m = _clear_the_floor(model, data, pose, q, qadr, legs, dofs, feet)
     changed = {"pitched_share": round(float(pitch.any(axis=1).mean()), 3),
                "max_pitch_deg": round(float(np.degrees(np.abs(pitch).max())), 1),
@@ -191,12 +192,6 @@ def _lower_heels(model, data, pose, q, qadr, legs, dofs, feet, early: np.ndarray
                              data.xquat[body].copy())
         q[f] = data.qpos[qadr]
     return need
-
-
-def _has_toes(model) -> bool:
-    import mujoco
-
-    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "toe.L") >= 0
 
 
 def _lay_toes_flat(model, data, pose, q, qadr) -> np.ndarray:
