@@ -184,10 +184,11 @@ class RootWrench:
 
     ``k_pf (p̄ − p) + k_df v̄`` and ``k_pr θ(R̄ Rᵀ) + k_dr ω̄``; the ``−k_df v``, ``−k_dr ω`` terms
     act through the free joint's implicit damping (:func:`set_root_damping`). Uses MuJoCo's
-    quaternion helpers (scipy's are 20× slower), with the targets and buffers bound once: the
-    simulation loop calls it every step (17 000 times in a 4-s walk), where a dictionary lookup
-    and four small allocations per call were a tenth of the step's time. The returned array is
-    this object's buffer, overwritten by the next call.
+    quaternion and matrix helpers (scipy's are 20× slower, numpy's temporaries 2×), with the
+    targets, buffers and the MjData arrays it reads and writes bound once: the simulation loop
+    calls it every step (17 000 times in a 4-s walk), where each lookup and small allocation is
+    a share of the step's time. The returned array is this object's buffer, overwritten by the
+    next call.
     """
 
     def __init__(self, gains: Gains, target: dict):
@@ -197,22 +198,35 @@ class RootWrench:
         self.pos, self.vel = target["root_pos"], target["root_vel"]
         self.quat, self.omega = target["root_quat"], target["root_omega"]
         self.inv, self.err_q, self.err = np.empty(4), np.empty(4), np.empty(3)
-        self.wrench = np.empty(6)
+        self.wrench, self.local = np.empty(6), np.empty(3)
+        self.force, self.torque = self.wrench[:3], self.wrench[3:]
         self.neg, self.mul, self.to_vel = mujoco.mju_negQuat, mujoco.mju_mulQuat, mujoco.mju_quat2Vel
+        self.sub, self.scale, self.add_scaled = mujoco.mju_sub3, mujoco.mju_scl3, mujoco.mju_addToScl3
+        self.rotate_back = mujoco.mju_mulMatTVec3
+        self.bound = None
 
     def __call__(self, pos, quat_wxyz, i: int) -> np.ndarray:
-        self.wrench[:3] = self.k_pf * (self.pos[i] - pos) + self.k_df * self.vel[i]
+        force, torque = self.force, self.torque
+        self.sub(force, self.pos[i], pos)
+        self.scale(force, force, self.k_pf)
+        self.add_scaled(force, self.vel[i], self.k_df)
         self.neg(self.inv, quat_wxyz)
         self.mul(self.err_q, self.quat[i], self.inv)
         self.to_vel(self.err, self.err_q, 1.0)
-        self.wrench[3:] = self.k_pr * self.err + self.k_dr * self.omega[i]
+        self.scale(torque, self.err, self.k_pr)
+        self.add_scaled(torque, self.omega[i], self.k_dr)
         return self.wrench
 
     def apply(self, data, i: int, pelvis: int) -> None:
         """:func:`apply_root_wrench` with this simulation's targets."""
-        wrench = self(data.qpos[:3], data.qpos[3:7], i)
-        data.qfrc_applied[0:3] = wrench[:3]
-        data.qfrc_applied[3:6] = data.xmat[pelvis].reshape(3, 3).T @ wrench[3:]
+        if self.bound is None or self.bound[0] is not data or self.bound[1] != pelvis:
+            # Views into MjData's fixed buffers (qpos, qfrc_applied, xmat live as long as the data).
+            self.bound = (data, pelvis, data.qpos[:3], data.qpos[3:7], data.qfrc_applied, data.xmat[pelvis])
+        pos, quat, qfrc, xmat = self.bound[2:]
+        self(pos, quat, i)
+        qfrc[0:3] = self.force
+        self.rotate_back(self.local, xmat, self.torque)
+        qfrc[3:6] = self.local
 
 
 # Actuator torque limits (N·m), the same for every body (fat mass adds no muscle), per joint and

@@ -172,17 +172,21 @@ def solve_leg(model, data, qadr, dofs, body: int, goal: np.ndarray, rot: np.ndar
     the world position ``goal`` and orientation ``rot`` (w, x, y, z); returns the last position error (m)."""
     import mujoco
 
-    jacp, jacr, err_rot = np.zeros((3, model.nv)), np.zeros((3, model.nv)), np.zeros(3)
+    # Buffers and the MjData views bound once: the simulation solves up to 500 times a second.
+    jac_full, err, err_rot = np.zeros((6, model.nv)), np.zeros(6), np.zeros(3)
+    jacp, jacr = jac_full[:3], jac_full[3:]
+    damping = IK_DAMPING * np.eye(6)
+    xpos, xquat, xmat, qpos = data.xpos[body], data.xquat[body], data.xmat[body].reshape(3, 3), data.qpos
     err_pos = np.zeros(3)
     for _ in range(iterations):
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        err_pos = goal - data.xpos[body]
-        mujoco.mju_subQuat(err_rot, rot, data.xquat[body])
-        err = np.concatenate([err_pos, data.xmat[body].reshape(3, 3) @ err_rot])
+        err_pos = goal - xpos
+        mujoco.mju_subQuat(err_rot, rot, xquat)
+        err[:3], err[3:] = err_pos, xmat @ err_rot
         mujoco.mj_jacBody(model, data, jacp, jacr, body)
-        jac = np.vstack([jacp, jacr])[:, dofs]
-        data.qpos[qadr] += jac.T @ np.linalg.solve(jac @ jac.T + IK_DAMPING * np.eye(6), err)
+        jac = jac_full[:, dofs]
+        qpos[qadr] += jac.T @ np.linalg.solve(jac @ jac.T + damping, err)
         if np.abs(err_pos).max() < tolerance_m:
             break
     return float(np.abs(err_pos).max())
