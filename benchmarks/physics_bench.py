@@ -25,7 +25,12 @@ itself), the simulated foot's depth in the floor, and what the stance leg's join
 pelvis's orientation error account for; beside them the stance knee's PD and feed-forward torques
 and the root spring's forward tow (issue 21's "single-support sag").
 
-    python benchmarks/physics_bench.py [--controllers OUT | --captures OUT | --single-support CAPTURE ...]
+``--ballistic MOTION ...`` (NoCOM averages as .npz, or runs under ``../shared/data/mocap``) prints
+each run's flight share by the contact model beside the share a body under gravity alone would
+have, leaving and landing as the run does (issue 21's men's capture-average jog).
+
+    python benchmarks/physics_bench.py [--controllers OUT | --captures OUT | --single-support CAPTURE ... |
+                                        --ballistic MOTION ...]
 """
 
 from __future__ import annotations
@@ -192,6 +197,77 @@ def single_support_table(captures: list[str]) -> None:
             print(name, group, " ".join(f"{key} {value:.4g}" for key, value in means.items()), flush=True)
 
 
+def ballistic_flight(motion, body, oversample: int = 8) -> dict[str, float]:
+    """The motion's flight share by the contact model (``contact_model``) beside the share it would
+    have under gravity alone (``ballistic``): each flight phase lasting as long as a body leaving
+    the floor with the reference's centre of mass height and vertical speed at take-off takes to
+    fall back to its centre of mass height at landing. The reference is posed on the ragdoll of
+    ``body`` (its segment masses) at ``oversample`` × its frame rate. A real capture's two agree
+    within a few points; a motion whose flight is not ballistic (an average of runs with different
+    flights) cannot have its own flight share under physics."""
+    import mujoco
+    import numpy as np
+
+    from stimuli.motion.contact import foot_contacts
+    from stimuli.physics.controller import motion_gait
+    from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
+    from stimuli.physics.reference import build_reference
+    from stimuli.physics.retarget import finely_sampled
+    from stimuli.physics.swing import actuator_qpos
+
+    toes = TOES_BY_GAIT[motion_gait(motion)]
+    ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, None, axes, toes=toes))
+    ones = {d: 1.0 for d in ragdoll.dof_names}
+    model = compile_model(ragdoll, 1e-3, ones, ones)
+    data, qadr = mujoco.MjData(model), actuator_qpos(model)
+    rate = ref.fps * oversample
+    pose = ref.sample(np.arange(ref.n_frames * oversample) / rate)
+    com = np.empty(len(pose["q"]))
+    for i in range(len(com)):
+        data.qpos[:3], data.qpos[3:7], data.qpos[qadr] = pose["root_pos"][i], pose["root_quat"][i], pose["q"][i]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        com[i] = data.subtree_com[model.body("pelvis").id, 1]
+    speed = (np.roll(com, -1) - np.roll(com, 1)) * rate / 2          # the clip is a loop
+    down = foot_contacts(finely_sampled(motion, rate)).down
+    flight = ~(down["l"] | down["r"])
+    if len(flight) != len(com):
+        raise ValueError(f"contacts have {len(flight)} samples, the pose {len(com)}")
+    n, extra = len(flight), 0.0
+    for start in (i for i in range(n) if flight[i] and not flight[i - 1]):
+        end = start
+        while flight[end % n]:
+            end += 1
+        y0, v0, y1 = com[start - 1], speed[start - 1], com[end % n]
+        # Falling and already below its landing height at take-off, a ballistic body lands at once.
+        fall = max(0.0, (v0 + np.sqrt(max(v0 ** 2 + 2 * 9.81 * (y0 - y1), 0.0))) / 9.81)
+        extra += fall - (end - start + 1) / rate
+    return {"contact_model": float(flight.mean()), "ballistic": float(flight.mean() + extra * rate / n)}
+
+
+def ballistic_table(paths: list[str]) -> None:
+    """Print :func:`ballistic_flight` per motion: a NoCOM average (.npz, on its sex's body of its
+    metadata's height and BMI) or a capture under ``../shared/data/mocap`` (looped, ~30 fps, on
+    the base character)."""
+    from stimuli.bodies import fit_body
+    from stimuli.motion import Motion
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import capture_loop
+
+    for name in paths:
+        if name.endswith(".npz"):
+            motion = Motion.load(name)
+            meta = motion.metadata
+            body = fit_body(meta["sex"], meta["height_m"], meta["bmi"])
+        else:
+            motion = capture_loop(read_bvh(MOCAP / name), "jog")
+            motion = motion.resample(30.0) if motion.fps > 30 else motion
+            body = fit_body("M", 1.75, 23.0)
+        shares = ballistic_flight(motion, body)
+        print(f"{name} flight {shares['contact_model']:.3f} (contact model), {shares['ballistic']:.3f} under gravity alone",
+              flush=True)
+
+
 def _cpu_s(resource) -> float:
     """CPU seconds of this process and its finished child processes (the protocol step's workers)."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -206,8 +282,13 @@ if __name__ == "__main__":
     parser.add_argument("--captures", metavar="OUT", help="the same on NoCOM averages of the real captures")
     parser.add_argument("--single-support", nargs="+", metavar="CAPTURE",
                         help="single-support pelvis height budget of these looped walks (../shared/data/mocap)")
+    parser.add_argument("--ballistic", nargs="+", metavar="MOTION",
+                        help="flight share of these runs (NoCOM .npz or ../shared/data/mocap captures) beside "
+                             "the share under gravity alone")
     args = parser.parse_args()
-    if args.single_support:
+    if args.ballistic:
+        ballistic_table(args.ballistic)
+    elif args.single_support:
         single_support_table(args.single_support)
     elif args.captures:
         compare_controllers(args.captures, str(captures_protocol(Path(args.captures))))
