@@ -209,6 +209,7 @@ def ballistic_flight(motion, body, oversample: int = 8) -> dict[str, float]:
     import numpy as np
 
     from stimuli.motion.contact import foot_contacts
+    from stimuli.motion.footfix import contact_runs
     from stimuli.physics.controller import motion_gait
     from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
     from stimuli.physics.reference import build_reference
@@ -234,14 +235,13 @@ def ballistic_flight(motion, body, oversample: int = 8) -> dict[str, float]:
     if len(flight) != len(com):
         raise ValueError(f"contacts have {len(flight)} samples, the pose {len(com)}")
     n, extra = len(flight), 0.0
-    for start in (i for i in range(n) if flight[i] and not flight[i - 1]):
-        end = start
-        while flight[end % n]:
-            end += 1
-        y0, v0, y1 = com[start - 1], speed[start - 1], com[end % n]
+    shift, phases = contact_runs(flight, cyclic=True)    # rolled to start on the floor
+    com, speed = np.roll(com, -shift), np.roll(speed, -shift)
+    for start, stop in phases:
+        y0, v0, y1 = com[start - 1], speed[start - 1], com[stop % n]
         # Falling and already below its landing height at take-off, a ballistic body lands at once.
         fall = max(0.0, (v0 + np.sqrt(max(v0 ** 2 + 2 * 9.81 * (y0 - y1), 0.0))) / 9.81)
-        extra += fall - (end - start + 1) / rate
+        extra += fall - (stop - start + 1) / rate
     return {"contact_model": float(flight.mean()), "ballistic": float(flight.mean() + extra * rate / n)}
 
 
