@@ -45,7 +45,7 @@ LAYOUT = (
 # Foot–floor friction. Not a knob for the walk hop: under MuJoCo's default pyramidal friction cone
 # μ also sets the normal contact's compliance (its rows are the cone edges n ± μt), so μ = 2 "cured"
 # the hop by sinking the feet 3–5 cm into the floor (and stopped the jogs flying); with the elliptic
-# cone, where μ is only friction, μ = 2 leaves the hop as it was (docs/readme_physics.md).
+# cone, where μ is only friction, μ = 2 leaves the hop as it was (docs/physics_log.md, "Why friction moved the hop").
 FOOT_FRICTION = 1.0
 # Foot–floor contact (MuJoCo solref: time constant s, damping ratio), set on both geoms so it is
 # not mixed with the default. Damped 1.5× critical instead of 1×: critically damped, the stiff PD
@@ -61,7 +61,7 @@ CONTACT_SOLREF = "0.03 1.5"
 # the walk with no foot down, against 0 in its reference) and on the Poser walk (0.115); with toes
 # 0.014 and 0.037, no walk worse. Jogs keep the box on its ball (stimuli.physics.toes): with toes
 # the Exp-2 women's jog averages stayed down into their flight, 0.14-0.18 of the jog in the air
-# against their reference's 0.21 (0.23-0.25 without) (docs/readme_physics.md, "The ragdoll's toes").
+# against their reference's 0.21 (0.23-0.25 without) (docs/physics_log.md, "The ragdoll's toes").
 TOES_BY_GAIT = {"walk": True, "jog": False}
 ARMATURE = 0.01  # kg·m² added to every hinge: keeps light segments stable at a 1 ms step
 

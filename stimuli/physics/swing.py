@@ -6,7 +6,7 @@ lands early, while the reference still swings it forward; the stiff leg then dra
 floor or pushes the body up, the body trails its target, the root spring tows it forward, the tow
 pitches it further forward, and the next foot lands earlier still. On real captures this loop
 settled at a 6–10° lean, a 7–9 cm trail and 3–20 % of each walk with no foot on the floor (the
-reference: none); the generator's walks never entered it (docs/readme_physics.md).
+reference: none); the generator's walks never entered it (docs/physics_log.md).
 
 During the reference's swing (the shared contact model, :func:`stimuli.motion.contact.foot_contacts`)
 the swing leg's joint targets are therefore solved by inverse kinematics on the simulated body so

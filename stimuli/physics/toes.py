@@ -6,7 +6,8 @@ its toes, so the posed box rises off the floor while the motion is still down: i
 jog average the box's ball rose 16–25 mm over the last 3–4 frames of every 10-frame stance, pitched
 11–21° toe down, and only 46 % of the frames had a box within 10 mm of the floor where the contact
 model has a foot down in 77 %. Tracked as it is, that reference leaves the floor early: the
-simulated jog flew 30 % against the reference's 23 % (readme: Controller variants).
+simulated jog flew 30 % against the reference's 23 % (docs/physics_log.md, "Runs: the reference
+stands on the ball of its box").
 
 :func:`stand_on_toes` therefore lays the reference's feet on the floor the way a foot without toes
 can: through the second half of each contact-model stance (:func:`stimuli.motion.contact.foot_contacts`)
@@ -25,7 +26,7 @@ flight against the reference's: the generated jog 0.50 → 0.30 (0.31), the Band
 jog got worse, 0.30 → 0.41 (0.15). On walks, where the swing placement already keeps the feet
 down, it moved the flight figures both ways and met no further bound (CMU 02_01 0.000 → 0.047,
 131_02 0.089 → 0.177, 07_12 0.127 → 0.088, the Bandai walk 0.128 → 0.098), so walks keep their
-reference's feet as they are (readme: Controller variants).
+reference's feet as they are (docs/physics_log.md, the same section).
 
 Example
 -------
