@@ -221,14 +221,14 @@ def ballistic_flight(motion, body, oversample: int = 8) -> dict[str, float]:
     ones = {d: 1.0 for d in ragdoll.dof_names}
     model = compile_model(ragdoll, 1e-3, ones, ones)
     data, qadr = mujoco.MjData(model), actuator_qpos(model)
-    rate = ref.fps * oversample
+    rate, pelvis = ref.fps * oversample, model.body("pelvis").id
     pose = ref.sample(np.arange(ref.n_frames * oversample) / rate)
     com = np.empty(len(pose["q"]))
     for i in range(len(com)):
         data.qpos[:3], data.qpos[3:7], data.qpos[qadr] = pose["root_pos"][i], pose["root_quat"][i], pose["q"][i]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        com[i] = data.subtree_com[model.body("pelvis").id, 1]
+        com[i] = data.subtree_com[pelvis, 1]
     speed = (np.roll(com, -1) - np.roll(com, 1)) * rate / 2          # the clip is a loop
     down = foot_contacts(finely_sampled(motion, rate)).down
     flight = ~(down["l"] | down["r"])
