@@ -45,6 +45,49 @@ def test_quat_mul_matches_scipy(v):
     assert np.allclose(quat.rotate(got, x), ref.apply(x), atol=1e-9)
 
 
+def _unroll_frame_by_frame(q: np.ndarray) -> np.ndarray:
+    """The definition: each frame flipped when its dot product with the previous, as flipped, is negative."""
+    q = np.array(q, float)
+    for t in range(1, len(q)):
+        flip = np.sum(q[t] * q[t - 1], axis=-1) < 0
+        q[t][flip] *= -1
+    return q
+
+
+def test_quat_unroll_is_the_frame_by_frame_definition_to_the_bit():
+    """Vectorised, with runs of flips, zero and NaN dot products (a frame after one keeps its sign)."""
+    rng = np.random.default_rng(7)
+    for trial in range(30):
+        q = rng.standard_normal((60, 5, 4))
+        q[10] = 0.0
+        q[20, 2] = np.nan
+        q[30:33] *= -1
+        got, want = quat.unroll(q), _unroll_frame_by_frame(q)
+        assert np.array_equal(got, want, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(want))
+    assert np.array_equal(quat.unroll(q.swapaxes(0, 1), axis=1), want.swapaxes(0, 1), equal_nan=True)
+    assert quat.unroll(np.zeros((0, 4))).shape == (0, 4)
+
+
+def test_forward_kinematics_by_depth_equals_joint_by_joint_to_the_bit():
+    motion = read_bvh(WALK)
+    grot, gpos = motion.global_transforms()
+    want_rot, want_pos = np.empty_like(grot), np.empty_like(gpos)
+    want_rot[:, 0], want_pos[:, 0] = motion.rotations[:, 0], motion.root_translation
+    for k in range(1, motion.n_joints):
+        p = motion.parents[k]
+        want_rot[:, k] = quat.mul(want_rot[:, p], motion.rotations[:, k])
+        want_pos[:, k] = want_pos[:, p] + quat.rotate(want_rot[:, p], motion.offsets[k])
+    assert np.array_equal(grot, want_rot) and np.array_equal(gpos, want_pos)
+
+
+def test_quat_product_and_rotation_broadcast_over_leading_axes():
+    rng = np.random.default_rng(8)
+    a, b, v = rng.standard_normal((3, 1, 4)), rng.standard_normal((1, 5, 4)), rng.standard_normal((5, 3))
+    assert quat.mul(a, b).shape == (3, 5, 4) and quat.rotate(a, v).shape == (3, 5, 3)
+    assert np.allclose(quat.mul(a, b)[2, 4], quat.mul(a[2, 0], b[0, 4]))
+    assert np.allclose(quat.rotate(a, v)[1, 2], quat.rotate(a[1, 0], v[2]))
+
+
 def test_quat_mean_is_sign_invariant_and_exact_for_identical():
     q = quat.from_axis_angle(np.array([0.2, 0.4, -0.1]))
     samples = np.stack([q, -q, q])
@@ -117,6 +160,14 @@ CMU_LIKE = ["Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "RightUpL
 def test_naming_detection(names, naming, role, joint):
     found = detect_roles(names)
     assert found["naming"] == naming and found["roles"][role] == joint
+
+
+def test_detected_roles_are_remembered_but_each_caller_gets_its_own_copy():
+    first = detect_roles(CMU_LIKE)
+    first["roles"]["l_knee"] = "changed by a caller"
+    assert detect_roles(CMU_LIKE)["roles"]["l_knee"] == "LeftLeg"
+    with pytest.raises(StimuliError, match="track.bvh"):      # the message names the file asked about
+        detect_roles(["root", "thigh_l"], where="track.bvh")
 
 
 def test_unknown_naming_asks_for_a_mapping(tmp_path):

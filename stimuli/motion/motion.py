@@ -121,10 +121,11 @@ class Motion:
         gpos = np.empty((t, j, 3))
         grot[:, 0] = rot[:, 0]
         gpos[:, 0] = root
-        for k in range(1, j):
-            p = self.parents[k]
-            grot[:, k] = quat.mul(grot[:, p], rot[:, k])
-            gpos[:, k] = gpos[:, p] + quat.rotate(grot[:, p], self.offsets[k])
+        # One product per depth of the tree, not per joint: the same arithmetic per element, in
+        # about a third of the calls (each call's overhead outweighs its few hundred frames).
+        for ks, ps in _depth_levels(self.parents[:j]):
+            grot[:, ks] = quat.mul(grot[:, ps], rot[:, ks])
+            gpos[:, ks] = gpos[:, ps] + quat.rotate(grot[:, ps], self.offsets[ks])
         return grot, gpos
 
     def positions(self) -> np.ndarray:
@@ -249,3 +250,15 @@ def _json_default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def _depth_levels(parents: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The non-root joints grouped by depth in the tree, root's children first: (joints, their parents) per depth.
+
+    >>> [(ks.tolist(), ps.tolist()) for ks, ps in _depth_levels(np.array([-1, 0, 1, 0, 3]))]
+    [([1, 3], [0, 0]), ([2, 4], [1, 3])]
+    """
+    depth = np.zeros(len(parents), int)
+    for k in range(1, len(parents)):
+        depth[k] = depth[parents[k]] + 1
+    return [(np.flatnonzero(depth == d), parents[depth == d]) for d in range(1, int(depth.max(initial=0)) + 1)]

@@ -41,15 +41,20 @@ def normalize(q: np.ndarray) -> np.ndarray:
 
 
 def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a ⊗ b (apply b first, then a)."""
-    aw, ax, ay, az = np.moveaxis(np.asarray(a, float), -1, 0)
-    bw, bx, by, bz = np.moveaxis(np.asarray(b, float), -1, 0)
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ], axis=-1)
+    """Hamilton product a ⊗ b (apply b first, then a).
+
+    Written into one preallocated array (the components' products as before): ``np.moveaxis`` and
+    ``np.stack`` took half of its time on the per-joint arrays forward kinematics passes it.
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = aw * bw - ax * bx - ay * by - az * bz
+    out[..., 1] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 2] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 3] = aw * bz + ax * by - ay * bx + az * bw
+    return out
 
 
 def inv(q: np.ndarray) -> np.ndarray:
@@ -58,20 +63,24 @@ def inv(q: np.ndarray) -> np.ndarray:
 
 
 def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v`` (..., 3) by quaternions ``q`` (..., 4)."""
+    """Rotate vectors ``v`` (..., 3) by quaternions ``q`` (..., 4).
+
+    ``v + w t + u × t`` with ``t = 2 u × v``, written out per component into one array (forward
+    kinematics calls it per joint on small arrays, where stacking the cross products cost more
+    than the arithmetic).
+    """
     q = np.asarray(q, float)
     v = np.asarray(v, float)
-    w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * _cross(u, v)
-    return v + w * t + _cross(u, t)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of (..., 3) arrays, written out: np.cross's axis handling dominated the foot
-    clean-up's time on the small per-frame arrays it rotates."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    w, u0, u1, u2 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    t0 = 2.0 * (u1 * v2 - u2 * v1)
+    t1 = 2.0 * (u2 * v0 - u0 * v2)
+    t2 = 2.0 * (u0 * v1 - u1 * v0)
+    out = np.empty(np.broadcast_shapes(q.shape[:-1] + (3,), v.shape))
+    out[..., 0] = v0 + w * t0 + (u1 * t2 - u2 * t1)
+    out[..., 1] = v1 + w * t1 + (u2 * t0 - u0 * t2)
+    out[..., 2] = v2 + w * t2 + (u0 * t1 - u1 * t0)
+    return out
 
 
 def from_axis_angle(rotvec: np.ndarray) -> np.ndarray:
@@ -123,12 +132,26 @@ def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def unroll(q: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Flip signs along ``axis`` so consecutive quaternions lie in the same hemisphere."""
-    q = np.array(q, float, copy=True)
-    q = np.moveaxis(q, axis, 0)
-    for t in range(1, q.shape[0]):
-        flip = np.sum(q[t] * q[t - 1], axis=-1) < 0
-        q[t][flip] *= -1
+    """Flip signs along ``axis`` so consecutive quaternions lie in the same hemisphere.
+
+    Frame t is flipped when its dot product with frame t−1 *as already flipped* is negative. A
+    flip negates a dot product exactly, so frame t's sign is the parity of the negative dot
+    products of the unflipped neighbours since the last zero (or NaN) one, after which a frame
+    keeps its sign: computed for all frames at once (the frame loop was a share of every reference's set-up).
+
+    >>> unroll(np.array([[1.0, 0, 0, 0], [-1.0, 0, 0, 0], [1.0, 0, 0, 0]]))[:, 0].tolist()
+    [1.0, 1.0, 1.0]
+    """
+    q = np.moveaxis(np.array(q, float, copy=True), axis, 0)
+    if q.shape[0] > 1:
+        dots = np.sum(q[1:] * q[:-1], axis=-1)
+        negative = dots < 0
+        kept = ~(negative | (dots > 0))                       # zero or NaN: this frame is never flipped
+        count = np.cumsum(negative, axis=0)
+        frame = np.arange(len(dots)).reshape((-1,) + (1,) * (dots.ndim - 1))
+        last_kept = np.maximum.accumulate(np.where(kept, frame, -1), axis=0)
+        since = count - np.where(last_kept >= 0, np.take_along_axis(count, np.maximum(last_kept, 0), axis=0), 0)
+        q[1:][since % 2 == 1] *= -1
     return np.moveaxis(q, 0, axis)
 
 
