@@ -258,6 +258,73 @@ def test_swing_placement_puts_a_swinging_foot_where_the_reference_has_it(walk, b
     assert np.linalg.norm(data.xpos[foot] - goal) < 0.001
 
 
+def _plain_leg_ik(model, data, qadr, dofs, body, goal, rot, iterations, tolerance_m):
+    """Damped least squares written plainly: fresh buffers, fancy indexing, ``np.linalg.solve``."""
+    import mujoco
+
+    jac_full, err_rot = np.zeros((6, model.nv)), np.zeros(3)
+    err_pos = np.zeros(3)
+    for _ in range(iterations):
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        err_pos = goal - data.xpos[body]
+        mujoco.mju_subQuat(err_rot, rot, data.xquat[body])
+        err = np.concatenate([err_pos, data.xmat[body].reshape(3, 3) @ err_rot])
+        mujoco.mj_jacBody(model, data, jac_full[:3], jac_full[3:], body)
+        jac = jac_full[:, dofs]
+        data.qpos[qadr] += jac.T @ np.linalg.solve(jac @ jac.T + 1e-4 * np.eye(6), err)
+        if np.abs(err_pos).max() < tolerance_m:
+            break
+    return float(np.abs(err_pos).max())
+
+
+def test_leg_solver_is_the_plain_damped_least_squares_to_the_bit(walk, body):
+    """The bound solver (LAPACK directly, views, no per-iteration allocation) changes no result."""
+    import mujoco
+
+    from stimuli.physics.retarget import prepare
+    from stimuli.physics.swing import LegSolver, actuator_qpos, leg_dofs
+
+    _, _, model, _ = prepare(walk, body)
+    data, plain = mujoco.MjData(model), mujoco.MjData(model)
+    qadr, (legs, dofs) = actuator_qpos(model), leg_dofs(model)
+    foot = model.body("foot.L").id
+    solver = LegSolver(model, data, qadr[legs[0]], dofs[0], foot)
+    rng = np.random.default_rng(0)
+    for trial in range(20):
+        pose = model.qpos0.copy()
+        pose[qadr] += rng.normal(0, 0.2, len(qadr))
+        plain.qpos[:] = pose
+        mujoco.mj_kinematics(model, plain)
+        goal = plain.xpos[foot] + rng.normal(0, 0.05, 3)
+        rot = plain.xquat[foot].copy()
+        data.qpos[:] = pose
+        iterations, tolerance = (8, 2e-4) if trial % 2 else (30, 1e-5)
+        error = solver.solve(goal, rot, iterations, tolerance)
+        assert error == _plain_leg_ik(model, plain, qadr[legs[0]], dofs[0], foot, goal, rot, iterations, tolerance)
+        assert np.array_equal(data.qpos, plain.qpos)
+
+
+def test_root_wrench_goes_into_the_free_joint_with_its_torque_in_the_pelvis_frame(walk, body):
+    import mujoco
+
+    from stimuli.physics.controller import Gains, RootWrench
+    from stimuli.physics.retarget import prepare
+
+    ref, _, model, _ = prepare(walk, body)
+    target = ref.sample(np.arange(5) / 100.0)
+    data = mujoco.MjData(model)
+    data.qpos[:3] = target["root_pos"][3] + [0.01, -0.02, 0.03]
+    data.qpos[3:7] = [0.99, 0.05, -0.1, 0.02] / np.linalg.norm([0.99, 0.05, -0.1, 0.02])
+    mujoco.mj_kinematics(model, data)
+    wrench = RootWrench(Gains.load(), target)
+    wrench.apply(data, 3, model.body("pelvis").id)
+    expected = wrench(data.qpos[:3], data.qpos[3:7], 3)
+    assert np.array_equal(data.qfrc_applied[:3], expected[:3])
+    pelvis_frame = data.xmat[model.body("pelvis").id].reshape(3, 3).T @ expected[3:]
+    assert np.allclose(data.qfrc_applied[3:6], pelvis_frame, rtol=1e-14, atol=1e-12)
+
+
 def test_walks_not_made_on_the_reference_body_are_retargeted_onto_it():
     from stimuli.bodies import fit_body
     from stimuli.motion.bvh import read_bvh

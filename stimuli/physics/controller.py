@@ -198,7 +198,7 @@ class RootWrench:
         self.pos, self.vel = target["root_pos"], target["root_vel"]
         self.quat, self.omega = target["root_quat"], target["root_omega"]
         self.inv, self.err_q, self.err = np.empty(4), np.empty(4), np.empty(3)
-        self.wrench, self.local = np.empty(6), np.empty(3)
+        self.wrench = np.empty(6)
         self.force, self.torque = self.wrench[:3], self.wrench[3:]
         self.neg, self.mul, self.to_vel = mujoco.mju_negQuat, mujoco.mju_mulQuat, mujoco.mju_quat2Vel
         self.sub, self.scale, self.add_scaled = mujoco.mju_sub3, mujoco.mju_scl3, mujoco.mju_addToScl3
@@ -206,7 +206,22 @@ class RootWrench:
         self.bound = None
 
     def __call__(self, pos, quat_wxyz, i: int) -> np.ndarray:
-        force, torque = self.force, self.torque
+        self._wrench(self.force, self.torque, pos, quat_wxyz, i)
+        return self.wrench
+
+    def apply(self, data, i: int, pelvis: int) -> None:
+        """:func:`apply_root_wrench` with this simulation's targets; the force goes straight into
+        ``qfrc_applied`` (no copy: this runs every step)."""
+        if self.bound is None or self.bound[0] is not data or self.bound[1] != pelvis:
+            # Views into MjData's fixed buffers (qpos, qfrc_applied, xmat live as long as the data).
+            self.bound = (data, pelvis, data.qpos[:3], data.qpos[3:7], data.qfrc_applied[0:3],
+                          data.qfrc_applied[3:6], data.xmat[pelvis])
+        _, _, pos, quat, force, local, xmat = self.bound
+        self._wrench(force, self.torque, pos, quat, i)
+        self.rotate_back(local, xmat, self.torque)
+
+    def _wrench(self, force, torque, pos, quat_wxyz, i: int) -> None:
+        """The world force and torque at step ``i`` into ``force`` and ``torque`` (3-vectors)."""
         self.sub(force, self.pos[i], pos)
         self.scale(force, force, self.k_pf)
         self.add_scaled(force, self.vel[i], self.k_df)
@@ -215,18 +230,6 @@ class RootWrench:
         self.to_vel(self.err, self.err_q, 1.0)
         self.scale(torque, self.err, self.k_pr)
         self.add_scaled(torque, self.omega[i], self.k_dr)
-        return self.wrench
-
-    def apply(self, data, i: int, pelvis: int) -> None:
-        """:func:`apply_root_wrench` with this simulation's targets."""
-        if self.bound is None or self.bound[0] is not data or self.bound[1] != pelvis:
-            # Views into MjData's fixed buffers (qpos, qfrc_applied, xmat live as long as the data).
-            self.bound = (data, pelvis, data.qpos[:3], data.qpos[3:7], data.qfrc_applied, data.xmat[pelvis])
-        pos, quat, qfrc, xmat = self.bound[2:]
-        self(pos, quat, i)
-        qfrc[0:3] = self.force
-        self.rotate_back(self.local, xmat, self.torque)
-        qfrc[3:6] = self.local
 
 
 # Actuator torque limits (N·m), the same for every body (fat mass adds no muscle), per joint and

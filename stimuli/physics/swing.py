@@ -78,6 +78,13 @@ class SwingPlacement:
     def n_frames(self) -> int:
         return len(self.weights)
 
+    def weight(self, t: float, side: int) -> float:
+        """The placement's weight at time ``t`` (linear), as :meth:`at` gives it."""
+        x = t * self.fps
+        f0 = int(np.floor(x))
+        a = x - f0
+        return (1 - a) * self.weights[f0 % self.n_frames, side] + a * self.weights[(f0 + 1) % self.n_frames, side]
+
     def at(self, t: float, side: int) -> tuple[float, np.ndarray, np.ndarray, float]:
         """(weight, foot position, foot quaternion, root forward offset) at time ``t`` (linear)."""
         x = t * self.fps
@@ -136,14 +143,16 @@ class SwingController:
         self.qadr = actuator_qpos(model)
         self.legs, self.dofs = leg_dofs(model)
         self.bodies = [model.body(f"foot.{s}").id for s in "LR"]
+        self.solvers = [LegSolver(model, self.scratch, self.qadr[leg], dofs, body)
+                        for leg, dofs, body in zip(self.legs, self.dofs, self.bodies)]
 
     def targets(self, data, t: float, q_ref: np.ndarray, root_ref: np.ndarray) -> np.ndarray:
         """Joint targets at time ``t``: ``q_ref`` with each swinging leg blended towards its IK solution."""
         out = q_ref.copy()
         for side in range(2):
-            w, pos, rot, root_z = self.placement.at(t, side)
-            if w <= 0.0:
+            if self.placement.weight(t, side) <= 0.0:   # stance: most of the time, and no pose to look up
                 continue
+            w, pos, rot, root_z = self.placement.at(t, side)
             goal = pos.copy()
             goal[2] += root_ref[2] - root_z          # the belt's progression since the clip's frame
             solved = self._solve(data, q_ref, side, goal, rot)
@@ -154,7 +163,7 @@ class SwingController:
         d, leg = self.scratch, self.legs[side]
         d.qpos[:] = data.qpos
         d.qpos[self.qadr[leg]] = q_ref[leg]
-        solve_leg(self.model, d, self.qadr[leg], self.dofs[side], self.bodies[side], goal, rot)
+        self.solvers[side].solve(goal, rot)
         return d.qpos[self.qadr[leg]].copy()
 
 
@@ -170,23 +179,69 @@ def solve_leg(model, data, qadr, dofs, body: int, goal: np.ndarray, rot: np.ndar
               iterations: int = IK_ITERATIONS, tolerance_m: float = IK_TOLERANCE_M) -> float:
     """Damped least-squares IK in place on ``data.qpos[qadr]`` (one leg) so that ``body`` reaches
     the world position ``goal`` and orientation ``rot`` (w, x, y, z); returns the last position error (m)."""
-    import mujoco
+    return LegSolver(model, data, qadr, dofs, body).solve(goal, rot, iterations, tolerance_m)
 
-    # Buffers and the MjData views bound once: the simulation solves up to 500 times a second.
-    jac_full, err, err_rot = np.zeros((6, model.nv)), np.zeros(6), np.zeros(3)
-    jacp, jacr = jac_full[:3], jac_full[3:]
-    damping = IK_DAMPING * np.eye(6)
-    xpos, xquat, xmat, qpos = data.xpos[body], data.xquat[body], data.xmat[body].reshape(3, 3), data.qpos
-    err_pos = np.zeros(3)
-    for _ in range(iterations):
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        err_pos = goal - xpos
-        mujoco.mju_subQuat(err_rot, rot, xquat)
-        err[:3], err[3:] = err_pos, xmat @ err_rot
-        mujoco.mj_jacBody(model, data, jacp, jacr, body)
-        jac = jac_full[:, dofs]
-        qpos[qadr] += jac.T @ np.linalg.solve(jac @ jac.T + damping, err)
-        if np.abs(err_pos).max() < tolerance_m:
-            break
-    return float(np.abs(err_pos).max())
+
+class LegSolver:
+    """:func:`solve_leg` for one leg of one MjData, with its buffers and views bound once.
+
+    The simulation solves up to 500 times a second, and each solve takes 3–4 iterations; per
+    iteration the buffer allocations and fancy indexing cost more than MuJoCo's kinematics, so
+    they are done once here. The Jacobian buffer is Fortran-ordered like the fancy-indexed copy
+    it replaces, so that the matrix products take the same BLAS paths and the solved joints are
+    the same to the bit (with a C-ordered one, most IK steps differed in their last bits).
+    """
+
+    def __init__(self, model, data, qadr, dofs, body: int):
+        import mujoco
+
+        self.model, self.data, self.body = model, data, body
+        self.kinematics, self.com_pos, self.jac_body = mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_jacBody
+        self.sub_quat = mujoco.mju_subQuat
+        self.qadr, self.dofs = np.asarray(qadr), np.asarray(dofs)
+        self.jac_full = np.zeros((6, model.nv))
+        self.jacp, self.jacr = self.jac_full[:3], self.jac_full[3:]
+        self.jac = np.empty((6, len(self.dofs)), order="F")
+        self.normal = np.empty((6, 6))
+        self.err, self.err_rot = np.zeros(6), np.zeros(3)
+        self.damping = IK_DAMPING * np.eye(6)
+        self.xpos, self.xquat, self.xmat = data.xpos[body], data.xquat[body], data.xmat[body].reshape(3, 3)
+        # Views where the leg's DoFs are consecutive (the ragdoll's are); fancy indexing otherwise.
+        self.dof_cols, leg = _as_slice(self.dofs), _as_slice(self.qadr)
+        self.leg_qpos = data.qpos[leg] if isinstance(leg, slice) else None
+
+    def solve(self, goal: np.ndarray, rot: np.ndarray, iterations: int = IK_ITERATIONS,
+              tolerance_m: float = IK_TOLERANCE_M) -> float:
+        """Iterate from the pose in ``data.qpos``; returns the last position error (m)."""
+        model, data, err, err_pos, jac, normal = self.model, self.data, self.err, self.err[:3], self.jac, self.normal
+        error = 0.0
+        for _ in range(iterations):
+            self.kinematics(model, data)
+            self.com_pos(model, data)
+            np.subtract(goal, self.xpos, out=err_pos)
+            self.sub_quat(self.err_rot, rot, self.xquat)
+            np.matmul(self.xmat, self.err_rot, out=err[3:])
+            self.jac_body(model, data, self.jacp, self.jacr, self.body)
+            np.copyto(jac, self.jac_full[:, self.dof_cols])
+            np.matmul(jac, jac.T, out=normal)
+            normal += self.damping
+            step = np.linalg.solve(normal, err)
+            if self.leg_qpos is None:
+                data.qpos[self.qadr] += jac.T @ step
+            else:
+                self.leg_qpos += jac.T @ step
+            error = max(map(abs, err_pos.tolist()))
+            if error < tolerance_m:
+                break
+        return error
+
+
+def _as_slice(index: np.ndarray):
+    """``index`` as a slice when it is a run of consecutive integers (a view, no copy), else itself.
+
+    >>> _as_slice(np.array([3, 4, 5])), _as_slice(np.array([3, 5]))
+    (slice(3, 6, None), array([3, 5]))
+    """
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return slice(int(index[0]), int(index[0]) + len(index))
+    return index
