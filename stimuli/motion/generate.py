@@ -21,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -263,8 +264,10 @@ def _pose(p: GaitParams, names: list[str], phi: np.ndarray, hip_scale: float, ad
     return rot
 
 
+@functools.lru_cache(maxsize=1)
 def _arm_lengths() -> tuple[float, float]:
-    """Upper arm and forearm length of the generator's skeleton as fractions of stature."""
+    """Upper arm and forearm length of the generator's skeleton as fractions of stature (constants of
+    its proportions, asked for by every step of the arm-flexion bisection)."""
     pts = skeleton_points(1.0)
     return (float(np.linalg.norm(pts["l_elbow"] - pts["l_shoulder"])),
             float(np.linalg.norm(pts["l_wrist"] - pts["l_elbow"])))
