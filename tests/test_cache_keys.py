@@ -326,3 +326,35 @@ def test_a_cached_unreachable_body_is_reported_under_its_own_id(tmp_path, monkey
     assert errors["F_second"].nearest.fit.cached
     assert str(errors["F_second"]) == str(errors["F_first"]).replace("body F_first:", "body F_second:")
     assert str(errors["F_second"]).startswith("body F_second:")
+
+
+def test_an_averages_simulations_start_before_the_next_average_and_a_bad_one_leaves_no_output(tmp_path, monkeypatch):
+    """The workers simulate the women's average while the men's is made (they sat idle for the ~8 s of
+    the averages); a failure in the next average still leaves no output folder behind."""
+    from stimuli.errors import StimuliError
+    from stimuli.motion.style import actor_gait
+    from stimuli.physics import protocol_step
+    from stimuli.protocol import load_protocol
+
+    from conftest import write_small_exp2
+
+    path = write_small_exp2(tmp_path / "exp2_small.yaml")
+    actor = load_protocol(path).actors[0]
+    walk = actor_gait(actor, "walk", 112, 1.2, 1, 30.0, 2)
+    walk.metadata.update(sex="F", height_m=actor.height_m, bmi=actor.bmi)
+
+    def nocom_motion(protocol, sex, gait, motions_dir):
+        if sex == "M":
+            raise StimuliError("the men's capture is broken")
+        return walk
+
+    submitted = []
+    monkeypatch.setattr(protocol_step, "nocom_motion", nocom_motion)
+    monkeypatch.setattr(protocol_step, "cache_dir", lambda: tmp_path / "cache")
+    monkeypatch.setattr(protocol_step._LazyPool, "submit", lambda self, fn, job: submitted.append(job["name"]))
+    with pytest.raises(StimuliError, match="men's capture is broken"):
+        protocol_step.run_protocol(path, tmp_path / "physics")
+    assert submitted == ["COM_F_Hi1_walk", "COM_F_Lo2_walk"]
+    assert not (tmp_path / "physics").exists()
+    staged = list((tmp_path / "cache").glob("nocom_*.npz"))   # the jobs' copy, named by its content
+    assert len(staged) == 1 and staged[0].read_bytes() == walk.to_bytes()

@@ -181,14 +181,19 @@ class Motion:
         from stimuli.fileio import atomic_write_bytes
 
         path = Path(path)
-        buffer = io.BytesIO()   # the same bytes as a file would get (zip entries carry no time)
+        atomic_write_bytes(path, self.to_bytes())   # e.g. ``path`` is a folder: no temporary file left
+        return path
+
+    def to_bytes(self) -> bytes:
+        """The ``.npz`` file's bytes (:meth:`save` writes them): the same for the same motion, as
+        zip entries carry no time."""
+        buffer = io.BytesIO()
         np.savez_compressed(
             buffer, fps=np.float64(self.fps), joint_names=np.array(self.joint_names, dtype=str),
             parents=self.parents.astype(np.int32), offsets=self.offsets,
             rotations=self.rotations, root_translation=self.root_translation,
             metadata=np.array(json.dumps(self.metadata, sort_keys=True, default=_json_default)))
-        atomic_write_bytes(path, buffer.getvalue())   # e.g. ``path`` is a folder: no temporary file left
-        return path
+        return buffer.getvalue()
 
     @classmethod
     def load(cls, path: str | Path) -> "Motion":

@@ -6,7 +6,9 @@ of gait cycles that fills the clip. The reference body (for b) is the body the N
 belongs to: its metadata ``height_m`` and ``weight_kg`` or ``bmi`` (read as ``physics retarget``
 reads them), else the mean height and BMI of the protocol's test actors of that sex, with a warning. Each COM motion is cached under
 ``$SHAPEMOTION_CACHE/physics`` keyed by the motion's bytes, the actor, the gains file and the code
-that makes it (the body, motion and physics packages), so a second run only copies files.
+that makes it (the body, motion and physics packages), so a second run only copies files. A NoCOM
+average's simulations start as soon as it is made, from a copy in the cache named by its content,
+while the next one is averaged; ``<out>`` is written only once every NoCOM motion has been checked.
 
 With the feed-forward controller the gains are chosen once per NoCOM motion on its reference body
 (:func:`stimuli.physics.tune.tune_for_motion`) and then kept for every actor; the choice is cached
@@ -16,12 +18,12 @@ reference body, gains file, code), and the actors' cache keys include the chosen
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
 import os
 import shutil
-from contextlib import contextmanager
 from concurrent.futures import as_completed
 from pathlib import Path
 
@@ -195,12 +197,16 @@ def _job(args: dict) -> dict:
     return report
 
 
-@contextmanager
+@contextlib.contextmanager
 def _pool(workers: int, scheduler, progress):
     """The local process pool, or with ``scheduler`` the Dask cluster behind :class:`_FilesByValue`."""
     if scheduler is None:
         with process_pool(workers) as pool:
-            yield pool
+            try:
+                yield pool
+            except BaseException:   # a bad input met while simulating: drop the queued work, not wait for it
+                pool.shutdown(wait=True, cancel_futures=True)
+                raise
         return
     from shapemotion.execution import dask_pool
 
@@ -251,6 +257,51 @@ def _write_back(job: dict, outputs: list[str], result, files: dict[str, bytes]):
     return result
 
 
+def _checked_nocom_motions(protocol, out: Path, motions_dir):
+    """(gait, sex, NoCOM motion, reference body (height, BMI), note) per gait × sex, each motion made
+    (or read from ``motions_dir``) and its reference body checked as it comes."""
+    for gait in protocol.gaits:
+        for sex in sorted({a.sex for a in protocol.actors}):
+            motion = nocom_motion(protocol, sex, gait, Path(motions_dir) if motions_dir else None)
+            source = Path(motions_dir) / f"{sex}_{gait}.npz" if motions_dir else out / "nocom" / f"{sex}_{gait}.npz"
+            yield (gait, sex, motion, *reference_targets(protocol, sex, motion, source))
+
+
+class _LazyPool:
+    """:func:`_pool`, entered into ``stack`` at the first task: a run whose motions are all cached
+    starts no worker (and connects to no cluster)."""
+
+    def __init__(self, stack: contextlib.ExitStack, workers: int, scheduler, progress):
+        self.stack, self.args, self.pool = stack, (workers, scheduler, progress), None
+
+    def submit(self, fn, job: dict):
+        if self.pool is None:
+            self.pool = self.stack.enter_context(_pool(*self.args))
+        return self.pool.submit(fn, job)
+
+    @property
+    def local(self):
+        """The local process pool once started (None before, and on a cluster, whose tasks send files back)."""
+        return self.pool if self.args[1] is None else None
+
+
+def _submit_missing(pool, jobs: list[dict]) -> list[tuple[dict, object]]:
+    """(job, future) for each of ``jobs`` whose report is not cached yet."""
+    return [(job, pool.submit(_job, job)) for job in jobs if not Path(job["out_report"]).is_file()]
+
+
+def _staged(motion, cache: Path) -> Path:
+    """``motion`` saved under ``cache`` by its content (``nocom_<digest>.npz``), for the jobs to read
+    before ``<out>`` exists: the same bytes as its copy in ``<out>/nocom``, hence the same cache keys."""
+    from stimuli.fileio import atomic_write_bytes
+
+    data = motion.to_bytes()
+    path = cache / f"nocom_{hashlib.sha256(data).hexdigest()[:20]}.npz"
+    if not path.is_file():
+        atomic_write_bytes(path, data)
+    return path
+
+
 def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | Path | None = None,
                  workers: int = 2, progress=None, feedforward: bool = False, scheduler=None) -> dict:
     """Make every COM motion of the protocol under ``out``.
@@ -267,7 +318,6 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     called with a line per simulated motion.
     """
     progress = progress or (lambda line: None)
-    from stimuli.physics.analysis_fig7 import plot_fig7
     from stimuli.physics.controller import GAINS_FILE
     from stimuli.protocol import load_protocol
 
@@ -275,60 +325,60 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
     out = Path(out)
     check_protocol_inputs(protocol, out, motions_dir, workers)
     gains_text = GAINS_FILE.read_text()
-    nocom, notes = [], []
-    for gait in protocol.gaits:   # every NoCOM motion and its reference body read and checked before any output
-        for sex in sorted({a.sex for a in protocol.actors}):
-            motion = nocom_motion(protocol, sex, gait, Path(motions_dir) if motions_dir else None)
-            source = Path(motions_dir) / f"{sex}_{gait}.npz" if motions_dir else out / "nocom" / f"{sex}_{gait}.npz"
-            reference, note = reference_targets(protocol, sex, motion, source)
-            notes += [note] if note else []
-            nocom.append((gait, sex, motion, reference))
-    for folder in ("nocom", "motions", "reports"):
-        (out / folder).mkdir(parents=True, exist_ok=True)
     cache = cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
-    paths = [motion.save(out / "nocom" / f"{sex}_{gait}.npz") for gait, sex, motion, _ in nocom]
+    nocom, notes = [], []
     actor_jobs = []   # per NoCOM motion: its actors' jobs once its gains are known
-    tunes = []        # feed-forward only: NoCOM motions whose gains must be chosen first
-    for i, (nocom_path, (gait, sex, motion, reference)) in enumerate(zip(paths, nocom)):
-        make = _actor_jobs(protocol, gait, sex, nocom_path, reference, feedforward, cache, gains_text)
-        tune = _tune_spec(nocom_path, sex, reference, cache, gains_text) if feedforward else None
-        if tune and not Path(tune["out"]).is_file():
-            tunes.append((tune, make, i))
-            actor_jobs.append([])
-        else:
-            actor_jobs.append(make(json.loads(Path(tune["out"]).read_text()) if tune else None))
-    todo = [j for jobs in actor_jobs for j in jobs if not Path(j["out_report"]).is_file()]
-    progress(f"physics: {len(todo)} COM motion(s) to simulate, {sum(map(len, actor_jobs)) - len(todo)} cached"
-             + (f"; gains to choose for {len(tunes)} NoCOM motion(s) first" if tunes else ""))
-    if todo or tunes:
-        workers = max(1, min(workers, len(todo) + len(tunes), os.cpu_count() or 1))
-        # spawned workers (a fork of a process that has loaded torch/OpenMP can deadlock on its locks)
-        # that die with this process (stimuli.workers); the gain choices go first, and each motion's
-        # actors as soon as its gains are known, so the workers never wait for all the choices
-        with _pool(workers, scheduler, progress) as pool:
-            chosen = {pool.submit(_tune_job, tune): (make, i) for tune, make, i in tunes}
-            running = [(job, pool.submit(_job, job)) for job in todo]
-            for done in as_completed(chosen):
-                make, i = chosen[done]
-                actor_jobs[i] = make(done.result())
-                progress(f"  gains for {Path(paths[i]).stem}: × {actor_jobs[i][0]['gains']['tuning']['scale']:g}")
-                running += [(job, pool.submit(_job, job)) for job in actor_jobs[i] if not Path(job["out_report"]).is_file()]
-            for job, future in running:
-                report = future.result()
-                progress(f"  {job['name']}: b {report['b_m'] * 1000:.2f} mm, tracking {report['tracking_rms_deg_overall']:.2f}°, "
-                         f"{'FELL' if report['fell'] else 'ok'}")
-    reports = []
-    for job in (j for jobs in actor_jobs for j in jobs):
-        report = json.loads(Path(job["out_report"]).read_text())
-        shutil.copyfile(job["out_report"], out / "reports" / f"{job['name']}.json")
-        com = out / "motions" / f"{job['name']}.npz"
-        if Path(job["out_motion"]).is_file():
-            shutil.copyfile(job["out_motion"], com)
-        else:   # it fell: an earlier run's COM motion left here would be rendered (--motions) as this one's
-            com.unlink(missing_ok=True)
-        reports.append(report)
-    figures = _figures(protocol, reports, out, plot_fig7)
+    chosen = {}       # feed-forward only: gain choices running -> (the actors' jobs maker, NoCOM index)
+    running = []      # (job, future) of every COM motion being simulated
+    # Spawned workers (a fork of a process that has loaded torch/OpenMP can deadlock on its locks) that
+    # die with this process (stimuli.workers), started at the first task. An average's work is sent as
+    # soon as it is made, so the workers simulate while this process averages the next one (the Exp-2
+    # averages hold one core for ~8 s); the gain choices go first, and each motion's actors as soon as
+    # its gains are known, so the workers never wait for all the choices.
+    with contextlib.ExitStack() as stack:
+        pool = _LazyPool(stack, max(1, min(workers, os.cpu_count() or 1)), scheduler, progress)
+        made = _checked_nocom_motions(protocol, out, motions_dir)
+        if motions_dir:   # files, quick to read: every one checked before the first simulation
+            made = list(made)
+        for gait, sex, motion, reference, note in made:
+            notes += [note] if note else []
+            staged = _staged(motion, cache)   # the jobs read this copy: <out> waits for every check
+            make = _actor_jobs(protocol, gait, sex, staged, reference, feedforward, cache, gains_text)
+            tune = _tune_spec(staged, sex, reference, cache, gains_text) if feedforward else None
+            if tune and not Path(tune["out"]).is_file():
+                chosen[pool.submit(_tune_job, tune)] = (make, len(nocom))
+                actor_jobs.append([])
+            else:
+                actor_jobs.append(make(json.loads(Path(tune["out"]).read_text()) if tune else None))
+                running += _submit_missing(pool, actor_jobs[-1])
+            nocom.append((gait, sex, motion))
+        for folder in ("nocom", "motions", "reports"):
+            (out / folder).mkdir(parents=True, exist_ok=True)
+        for gait, sex, motion in nocom:
+            motion.save(out / "nocom" / f"{sex}_{gait}.npz")
+        progress(f"physics: {len(running)} COM motion(s) to simulate, {sum(map(len, actor_jobs)) - len(running)} cached"
+                 + (f"; gains to choose for {len(chosen)} NoCOM motion(s) first" if chosen else ""))
+        for done in as_completed(chosen):
+            make, i = chosen[done]
+            actor_jobs[i] = make(done.result())
+            progress(f"  gains for {nocom[i][1]}_{nocom[i][0]}: × {actor_jobs[i][0]['gains']['tuning']['scale']:g}")
+            running += _submit_missing(pool, actor_jobs[i])
+        for job, future in running:
+            report = future.result()
+            progress(f"  {job['name']}: b {report['b_m'] * 1000:.2f} mm, tracking {report['tracking_rms_deg_overall']:.2f}°, "
+                     f"{'FELL' if report['fell'] else 'ok'}")
+        reports = []
+        for job in (j for jobs in actor_jobs for j in jobs):
+            report = json.loads(Path(job["out_report"]).read_text())
+            shutil.copyfile(job["out_report"], out / "reports" / f"{job['name']}.json")
+            com = out / "motions" / f"{job['name']}.npz"
+            if Path(job["out_motion"]).is_file():
+                shutil.copyfile(job["out_motion"], com)
+            else:   # it fell: an earlier run's COM motion left here would be rendered (--motions) as this one's
+                com.unlink(missing_ok=True)
+            reports.append(report)
+        figures = _figures(protocol, reports, out, pool.local)
     _summary(reports, out / "summary.csv")
     fell = [f"{r['actor']} ({r['gait']}): {r['fall_reason']}" for r in reports if r["fell"]]
     if fell:
@@ -348,14 +398,25 @@ def clip_warnings(reports: list[dict]) -> list[str]:
             for line in result_warnings(r, r["gait"])]
 
 
-def _figures(protocol, reports: list[dict], out: Path, plot) -> list[Path]:
-    paths = []
+def _figures(protocol, reports: list[dict], out: Path, pool=None) -> list[Path]:
+    """Fig. 7 of each gait (:func:`stimuli.physics.analysis_fig7.plot_fig7`), drawn side by side on
+    ``pool``'s workers when given (each takes a core for ~2 s), else here."""
+    drawings = []
     for gait in protocol.gaits:
         curves = {f"{r['body']['sex']}/{r['actor']}": dict(r["fig7"], bmi=r["body"]["bmi"], sex=r["body"]["sex"])
                   for r in reports if r["gait"] == gait and "fig7" in r and not r["actor"].split("_")[-1].startswith("P")}
         if curves:
-            paths += plot(curves, out / f"fig7_{gait}", title=f"{protocol.name}: COM method, {gait}", gait=gait)
-    return paths
+            args = (curves, out / f"fig7_{gait}", f"{protocol.name}: COM method, {gait}", gait)
+            drawings.append(pool.submit(_figure_job, args) if pool else _figure_job(args))
+    return [path for drawn in drawings for path in (drawn.result() if pool else drawn)]
+
+
+def _figure_job(args: tuple) -> list[Path]:
+    """One gait's Fig. 7 (curves, output stem, title, gait); runs in a worker process or here."""
+    from stimuli.physics.analysis_fig7 import plot_fig7
+
+    curves, stem, title, gait = args
+    return plot_fig7(curves, stem, title=title, gait=gait)
 
 
 def over_limit(peaks: dict) -> str:
