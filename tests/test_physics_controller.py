@@ -102,6 +102,24 @@ def test_inverse_dynamics_ground_force_carries_the_body(walk, body):
     assert np.abs(residual).max() < 1e-6 * weight        # so the feet take the whole root wrench
 
 
+def test_feedforward_is_kept_per_motion_and_body_by_content(walk, body, heavy):
+    """The actors of a protocol step share their NoCOM motion's feed-forward: the second call with an
+    equal motion and body (other objects) returns the kept one; another body or motion gets its own."""
+    from stimuli.physics import feedforward
+    from stimuli.physics.feedforward import _reference_feedforward, reference_feedforward
+
+    feedforward._KEPT.clear()
+    first = reference_feedforward(walk, body)
+    again = reference_feedforward(walk.copy(), body)
+    assert again is first
+    assert np.array_equal(first.torque, _reference_feedforward(walk, body, False, True).torque)
+    assert reference_feedforward(walk, heavy) is not first
+    slower = walk.replace(root_translation=walk.root_translation * 0.9)
+    assert reference_feedforward(slower, body) is not first
+    assert reference_feedforward(walk, body, toe_segment=False) is not first
+    assert len(feedforward._KEPT) == feedforward.KEPT_FEEDFORWARDS
+
+
 def test_torque_limits_are_respected_with_feedforward(walk, body, heavy):
     from stimuli.physics.controller import set_torque_limits, torque_limit
     from stimuli.physics.feedforward import reference_feedforward

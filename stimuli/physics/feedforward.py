@@ -34,7 +34,10 @@ Example
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import hashlib
+import json
 
 import numpy as np
 
@@ -172,7 +175,42 @@ def reference_feedforward(motion, reference_body, rate_hz: float | None = None, 
     """Feed-forward torques of ``motion`` performed by the ragdoll of ``reference_body`` (with toe
     segments or not: ``toe_segment``, as the simulated ragdoll); with ``toes``, of the reference
     whose foot boxes stand on their ball where the motion stands on its toes
-    (:func:`stimuli.physics.toes.stand_on_toes`), the one the controller then tracks."""
+    (:func:`stimuli.physics.toes.stand_on_toes`), the one the controller then tracks.
+
+    The result is kept for the process's next calls with the same motion and body (by content):
+    every actor of a protocol step shares its NoCOM motion's, which took 0.4–0.5 s a jog clip to
+    make again. It is shared, so it must not be changed.
+    """
+    key = (_content_key(motion, reference_body), rate_hz, bool(toes), bool(toe_segment))
+    if key in _KEPT:
+        _KEPT.move_to_end(key)
+        return _KEPT[key]
+    _KEPT[key] = _reference_feedforward(motion, reference_body, toes, toe_segment)
+    if len(_KEPT) > KEPT_FEEDFORWARDS:
+        _KEPT.popitem(last=False)
+    return _KEPT[key]
+
+
+# A protocol step has one NoCOM motion per sex × gait, each on its own reference body.
+KEPT_FEEDFORWARDS = 4
+_KEPT: collections.OrderedDict = collections.OrderedDict()
+
+
+def _content_key(motion, body) -> str:
+    """A digest of what the feed-forward depends on: the motion's skeleton and frames, and the
+    reference body's mesh, rig and measured mass and height (from which its ragdoll is built)."""
+    digest = hashlib.sha256()
+    for array in (motion.rotations, motion.root_translation, motion.offsets, motion.parents,
+                  body.vertices, body.rig.rest_heads, body.rig.rest_tails, body.rig.rest_rotations):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(json.dumps([motion.fps, motion.joint_names, motion.metadata, body.sex, body.rig.names,
+                              body.anthropometry.mass_kg, body.anthropometry.height_m], sort_keys=True,
+                             default=str).encode())
+    return digest.hexdigest()
+
+
+def _reference_feedforward(motion, reference_body, toes: bool, toe_segment: bool) -> Feedforward:
+    """:func:`reference_feedforward`, computed."""
     from stimuli.physics.ragdoll import build_ragdoll, compile_model
     from stimuli.physics.reference import build_reference
 
