@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from stimuli.errors import StimuliError
-from stimuli.fileio import atomic_write_text, source_digest
+from stimuli.fileio import atomic_write_bytes, atomic_write_text, source_digest
 from stimuli.physics.checks import result_warnings
 from stimuli.workers import process_pool
 
@@ -249,8 +249,6 @@ def _on_worker(fn, job: dict, motion: bytes, outputs: list[str]):
 
 
 def _write_back(job: dict, outputs: list[str], result, files: dict[str, bytes]):
-    from stimuli.fileio import atomic_write_bytes
-
     for k in outputs:
         if k in files:
             atomic_write_bytes(job[k], files[k])
@@ -293,8 +291,6 @@ def _submit_missing(pool, jobs: list[dict]) -> list[tuple[dict, object]]:
 def _staged(motion, cache: Path) -> Path:
     """``motion`` saved under ``cache`` by its content (``nocom_<digest>.npz``), for the jobs to read
     before ``<out>`` exists: the same bytes as its copy in ``<out>/nocom``, hence the same cache keys."""
-    from stimuli.fileio import atomic_write_bytes
-
     data = motion.to_bytes()
     path = cache / f"nocom_{hashlib.sha256(data).hexdigest()[:20]}.npz"
     if not path.is_file():
@@ -352,11 +348,11 @@ def run_protocol(protocol_path: str | Path, out: str | Path, motions_dir: str | 
             else:
                 actor_jobs.append(make(json.loads(Path(tune["out"]).read_text()) if tune else None))
                 running += _submit_missing(pool, actor_jobs[-1])
-            nocom.append((gait, sex, motion))
+            nocom.append((gait, sex, staged))
         for folder in ("nocom", "motions", "reports"):
             (out / folder).mkdir(parents=True, exist_ok=True)
-        for gait, sex, motion in nocom:
-            motion.save(out / "nocom" / f"{sex}_{gait}.npz")
+        for gait, sex, staged in nocom:   # the staged copy's bytes: compressed once
+            atomic_write_bytes(out / "nocom" / f"{sex}_{gait}.npz", staged.read_bytes())
         progress(f"physics: {len(running)} COM motion(s) to simulate, {sum(map(len, actor_jobs)) - len(running)} cached"
                  + (f"; gains to choose for {len(chosen)} NoCOM motion(s) first" if chosen else ""))
         for done in as_completed(chosen):
