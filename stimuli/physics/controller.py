@@ -184,11 +184,11 @@ class RootWrench:
 
     ``k_pf (p̄ − p) + k_df v̄`` and ``k_pr θ(R̄ Rᵀ) + k_dr ω̄``; the ``−k_df v``, ``−k_dr ω`` terms
     act through the free joint's implicit damping (:func:`set_root_damping`). Uses MuJoCo's
-    quaternion and matrix helpers (scipy's are 20× slower, numpy's temporaries 2×), with the
-    targets, buffers and the MjData arrays it reads and writes bound once: the simulation loop
-    calls it every step (17 000 times in a 4-s walk), where each lookup and small allocation is
-    a share of the step's time. The returned array is this object's buffer, overwritten by the
-    next call.
+    quaternion and matrix helpers (scipy's are 20× slower, numpy's temporaries 2×). The
+    simulation's compiled loop (:mod:`stimuli.physics.stepper`) makes the same MuJoCo calls in
+    the same order on this object's targets and gains; :meth:`apply` is their plain Python form,
+    which the tests hold the loop to. The returned array is this object's buffer, overwritten by
+    the next call.
     """
 
     def __init__(self, gains: Gains, target: dict):
@@ -203,7 +203,6 @@ class RootWrench:
         self.neg, self.mul, self.to_vel = mujoco.mju_negQuat, mujoco.mju_mulQuat, mujoco.mju_quat2Vel
         self.sub, self.scale, self.add_scaled = mujoco.mju_sub3, mujoco.mju_scl3, mujoco.mju_addToScl3
         self.rotate_back = mujoco.mju_mulMatTVec3
-        self.bound = None
 
     def __call__(self, pos, quat_wxyz, i: int) -> np.ndarray:
         self._wrench(self.force, self.torque, pos, quat_wxyz, i)
@@ -211,14 +210,9 @@ class RootWrench:
 
     def apply(self, data, i: int, pelvis: int) -> None:
         """:func:`apply_root_wrench` with this simulation's targets; the force goes straight into
-        ``qfrc_applied`` (no copy: this runs every step)."""
-        if self.bound is None or self.bound[0] is not data or self.bound[1] != pelvis:
-            # Views into MjData's fixed buffers (qpos, qfrc_applied, xmat live as long as the data).
-            self.bound = (data, pelvis, data.qpos[:3], data.qpos[3:7], data.qfrc_applied[0:3],
-                          data.qfrc_applied[3:6], data.xmat[pelvis])
-        _, _, pos, quat, force, local, xmat = self.bound
-        self._wrench(force, self.torque, pos, quat, i)
-        self.rotate_back(local, xmat, self.torque)
+        ``qfrc_applied``."""
+        self._wrench(data.qfrc_applied[0:3], self.torque, data.qpos[:3], data.qpos[3:7], i)
+        self.rotate_back(data.qfrc_applied[3:6], data.xmat[pelvis], self.torque)
 
     def _wrench(self, force, torque, pos, quat_wxyz, i: int) -> None:
         """The world force and torque at step ``i`` into ``force`` and ``torque`` (3-vectors)."""

@@ -16,6 +16,8 @@ import time
 import numpy as np
 
 from stimuli.physics.controller import Gains, RootWrench, set_root_damping
+from stimuli.physics.stepper import Stepper
+from stimuli.physics.swing import UPDATE_STEPS, SwingController, swing_placement
 
 MIN_RATE_HZ = 500.0
 # 4 kHz: the stiff PD legs on soft contacts are not converged at 1 kHz — from 1 to 2 to 4 to
@@ -176,46 +178,35 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
         tau_ff = feedforward.sample(np.arange(n_steps) * dt) - model.actuator_biasprm[:, 2] * target["qd"]
     swing = None
     if swing_stance is not None:
-        from stimuli.physics.swing import UPDATE_STEPS, SwingController, swing_placement
-
         swing = SwingController(model, swing_placement(model, ref, swing_stance, lift))
-        offset = np.zeros(model.nu)
     rec = {key: [] for key in ("qpos", "q", "qref", "xquat", "xpos", "root_target", "root_target_quat", "pelvis_com")}
     forces = np.zeros((n_steps, model.nu))
     contact = np.zeros((n_steps, 2), bool)
     target_height = target["root_pos"][:, 1]
     fell, fall_time, reason = False, None, ""
-    # Bound once: this loop runs ~4000 times per simulated second.
-    root_wrench, q_target, ctrl, bias = RootWrench(gains, target), target["q"], data.ctrl, model.actuator_biasprm
-    actuator_force = data.actuator_force
-    step, bad_qacc = mujoco.mj_step, data.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+    stepper = Stepper(model, data, target["q"], tau_ff, RootWrench(gains, target), pelvis, forces, contact, side_of_geom)
+    offset = None
+    update_steps = UPDATE_STEPS if swing is not None else n_steps
     wall = time.perf_counter()
-    for i in range(n_steps):
+    i = 0
+    while i < n_steps:
+        # Python between the compiled runs: a recorded frame, a swing-foot solve, a fall check.
         if i % k == 0 and i // k >= start_frame:
             _record(rec, data, target, i, dof_adr, pelvis)
-        if swing is None:
-            ctrl[:] = q_target[i]
-        else:
-            if i % UPDATE_STEPS == 0:
-                offset = swing.targets(data, i * dt, q_target[i], target["root_pos"][i]) - q_target[i]
-            np.add(q_target[i], offset, out=ctrl)
-        if tau_ff is not None:
-            bias[:, 0] = tau_ff[i]
-        root_wrench.apply(data, i, pelvis)
-        step(model, data)
-        if bad_qacc.number:
+        if swing is not None and i % UPDATE_STEPS == 0:
+            offset = swing.targets(data, i * dt, target["q"][i], target["root_pos"][i]) - target["q"][i]
+        end = i + 1 if i % k == 0 else min((i // k + 1) * k, (i // update_steps + 1) * update_steps, n_steps)
+        i, diverged = stepper.run(i, end, offset)
+        if diverged:
             fell, fall_time, reason = True, (i + 1) * dt, "the simulation diverged (gains unstable for this body)"
             break
-        forces[i] = actuator_force
-        ncon = data.ncon
-        if ncon:   # a list's `in` is 3× faster than a bincount on these few contacts
-            sides = side_of_geom[data.contact.geom[:ncon]].ravel().tolist()
-            contact[i] = (0 in sides, 1 in sides)
         if i % k == 0:
             reason = _fall_reason(data, pelvis, trunk, target, i, target_height[i])
             if reason:
                 fell, fall_time = True, (i + 1) * dt
                 break
+        i += 1
+    i = min(i, n_steps - 1)
     wall = time.perf_counter() - wall
     model.actuator_biasprm[:, 0] = 0.0
     simulated = (i + 1) * dt

@@ -1,0 +1,196 @@
+"""The simulation's inner loop, compiled: the steps between two Python-side events in one call.
+
+A 4-s walk is 17 000 MuJoCo steps, and around each ``mj_step`` (40–55 µs here) the Python loop
+spent another 25–45 µs setting the targets, the feed-forward and the root wrench and reading the
+forces and the foot contacts back: more than the physics itself. :func:`run_steps` does that work
+in machine code (numba), calling MuJoCo's own C functions (``mj_step`` and the same ``mju_*``
+helpers :class:`stimuli.physics.controller.RootWrench` calls), so every number is the same to the
+bit as the Python loop's; ``tests/test_physics_stepper.py`` checks it against that loop.
+
+The loop reads three things that the Python bindings give only as copies: the contact count, the
+contacts' geoms and (for the step's divergence check) the warning counters. Their places in
+MuJoCo's ``mjData`` are found once per process on a probe model and checked there against the
+bindings' own values (:func:`layout`); :class:`Stepper` checks the contact count again at every
+return to Python, so a MuJoCo whose layout differs fails loudly instead of recording wrong contacts.
+
+Example:
+    >>> from stimuli.physics.stepper import layout
+    >>> layout().contact_stride > 0
+    True
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import functools
+from pathlib import Path
+
+import numpy as np
+from numba import njit, types
+from numba.core.types import ExternalFunction
+
+@functools.cache
+def _load_library() -> None:
+    """Make the MuJoCo library the Python bindings loaded (the same copy, so the same global state,
+    such as the warning handler) visible to the compiled code, which calls its functions by name."""
+    import llvmlite.binding
+    import mujoco
+
+    folder = Path(mujoco.__file__).parent
+    found = sorted(folder.glob("libmujoco.so*")) + sorted(folder.glob("libmujoco*.dylib")) + sorted(folder.glob("mujoco.dll"))
+    if not found:
+        raise RuntimeError(f"no MuJoCo library next to {mujoco.__file__}")
+    llvmlite.binding.load_library_permanently(str(found[0]))
+
+
+_load_library()
+# MuJoCo's C functions; their pointer arguments are passed as addresses (uint64). Named, not bound
+# to an address, so the compiled loop can be cached on disk.
+_ADDRESS = types.uint64
+_mj_step = ExternalFunction("mj_step", types.void(_ADDRESS, _ADDRESS))
+_sub3 = ExternalFunction("mju_sub3", types.void(_ADDRESS, _ADDRESS, _ADDRESS))
+_scl3 = ExternalFunction("mju_scl3", types.void(_ADDRESS, _ADDRESS, types.float64))
+_add_to_scl3 = ExternalFunction("mju_addToScl3", types.void(_ADDRESS, _ADDRESS, types.float64))
+_neg_quat = ExternalFunction("mju_negQuat", types.void(_ADDRESS, _ADDRESS))
+_mul_quat = ExternalFunction("mju_mulQuat", types.void(_ADDRESS, _ADDRESS, _ADDRESS))
+_quat2vel = ExternalFunction("mju_quat2Vel", types.void(_ADDRESS, _ADDRESS, types.float64))
+_mul_mat_t_vec3 = ExternalFunction("mju_mulMatTVec3", types.void(_ADDRESS, _ADDRESS, _ADDRESS))
+
+
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """Where the loop finds what the bindings only copy out of an ``mjData`` (bytes)."""
+
+    ncon_offset: int        # ``ncon``, from the ``mjData`` address
+    arena_offset: int       # the ``arena`` pointer, from the ``mjData`` address
+    contact_stride: int     # ``sizeof(mjContact)``
+    geom_offset: int        # ``mjContact.geom``, from the contact's start
+
+
+@functools.cache
+def layout() -> Layout:
+    """This MuJoCo's :class:`Layout`, found and checked on a box falling onto a plane.
+
+    ``ncon`` follows the timer statistics (``mjdata.h``); ``arena`` is the field before ``qpos``,
+    found as the pointer field holding the bindings' ``qpos`` address followed by their ``qvel``'s; contacts start at the
+    arena (``mj_clearEfc``). Each is checked against the bindings before and after contacts appear.
+    """
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><geom type="plane" size="1 1 .1"/><body pos="0 0 .3"><freejoint/>'
+        '<geom type="box" size=".1 .1 .1"/></body></worldbody></mujoco>')
+    data = mujoco.MjData(model)
+    base = data._address
+    timer = data.timer.duration
+    ncon_offset = _address(timer) + timer.strides[0] * len(timer) - base
+    qpos_field = next(offset for offset in range(ncon_offset, ncon_offset + 4096, 8)
+                      if (ctypes.c_uint64.from_address(base + offset).value,
+                          ctypes.c_uint64.from_address(base + offset + 8).value) == (_address(data.qpos), _address(data.qvel)))
+    arena_offset = qpos_field - 8
+    mujoco.mj_forward(model, data)
+    empty = ctypes.c_int.from_address(base + ncon_offset).value
+    for _ in range(400):
+        mujoco.mj_step(model, data)
+    geoms = data.contact.geom
+    arena = ctypes.c_uint64.from_address(base + arena_offset).value
+    found = Layout(ncon_offset, arena_offset, int(geoms.strides[0]), _address(geoms) - arena)
+    if (empty, ctypes.c_int.from_address(base + ncon_offset).value) != (0, data.ncon) or data.ncon < 2 \
+            or not 0 <= found.geom_offset < found.contact_stride:
+        raise RuntimeError(f"MuJoCo {mujoco.__version__}: its mjData is not laid out as the compiled loop reads it")
+    return found
+
+
+def _address(array: np.ndarray) -> int:
+    return int(array.__array_interface__["data"][0])
+
+
+def _view(address: int, dtype, count: int) -> np.ndarray:
+    """``count`` items of ``dtype`` at ``address`` (memory owned by MuJoCo), without a copy."""
+    return np.frombuffer((ctypes.c_byte * (count * np.dtype(dtype).itemsize)).from_address(address), dtype)
+
+
+class Stepper:
+    """One simulation's compiled steps: :meth:`run` advances from step ``lo`` to ``hi``.
+
+    The arrays are those of :func:`stimuli.physics.simulate.simulate`: per-step joint targets
+    ``q_target`` (steps × nu), feed-forward ``tau_ff`` (steps × nu, or None), the root wrench's
+    targets and gains (a :class:`stimuli.physics.controller.RootWrench`), and the outputs it fills
+    at each step, ``forces`` (steps × nu) and ``contact`` (steps × 2, by ``side_of_geom``).
+    """
+
+    def __init__(self, model, data, q_target, tau_ff, root_wrench, pelvis: int, forces, contact, side_of_geom):
+        import mujoco
+
+        where = layout()
+        arena = ctypes.c_uint64.from_address(data._address + where.arena_offset).value
+        capacity = (model.narena - where.geom_offset - 8) // where.contact_stride
+        words = where.contact_stride // 4
+        geoms = _view(arena, np.int32, capacity * words).reshape(capacity, words)[:, where.geom_offset // 4:where.geom_offset // 4 + 2]
+        self._ncon = _view(data._address + where.ncon_offset, np.int32, 1)
+        self._model, self._data = model, data   # the loop holds their raw addresses: keep them alive
+        no_ff = np.zeros((0, model.nu))
+        w = root_wrench
+        self._args = (
+            model._address, data._address, data.ctrl, np.ascontiguousarray(q_target),
+            no_ff if tau_ff is None else np.ascontiguousarray(tau_ff), model.actuator_biasprm,
+            np.ascontiguousarray(w.pos), np.ascontiguousarray(w.vel), np.ascontiguousarray(w.quat),
+            np.ascontiguousarray(w.omega), np.array([w.k_pf, w.k_df, w.k_pr, w.k_dr], float),
+            np.zeros(4), np.zeros(4), np.zeros(3), np.zeros(3),
+            data.qpos, data.qfrc_applied, data.xmat[pelvis], data.actuator_force, forces, contact,
+            np.ascontiguousarray(side_of_geom, dtype=np.int64), self._ncon, geoms,
+            data.warning.number, int(mujoco.mjtWarning.mjWARN_BADQACC))
+        self.run(0, 0)   # compiles the loop, or loads it from numba's cache, before any timing
+
+    def run(self, lo: int, hi: int, offset: np.ndarray | None = None) -> tuple[int, bool]:
+        """Steps ``lo`` … ``hi − 1`` (joint targets ``q_target[i] + offset`` when given).
+
+        Returns the step it stopped after and whether that step diverged (MuJoCo's bad-acceleration
+        warning: then that step's forces and contacts are not recorded).
+        """
+        has_offset = offset is not None
+        last, diverged = _run(lo, hi, offset if has_offset else np.zeros(0), has_offset, *self._args)
+        if self._ncon[0] != self._data.ncon:
+            raise RuntimeError("the compiled loop read a contact count MuJoCo does not report")
+        return last, diverged
+
+
+@njit(cache=True)
+def _run(lo, hi, offset, has_offset, model, data, ctrl, q_target, tau_ff, bias, pos, vel, quat, omega,
+         k, inv, err_q, err, torque, qpos, qfrc, xmat, actuator_force, forces, contact, side_of_geom,
+         ncon, geoms, warnings, bad_qacc):
+    nu = ctrl.shape[0]
+    has_ff = tau_ff.shape[0] > 0
+    for i in range(lo, hi):
+        for j in range(nu):
+            ctrl[j] = q_target[i, j] + offset[j] if has_offset else q_target[i, j]
+        if has_ff:
+            for j in range(nu):
+                bias[j, 0] = tau_ff[i, j]
+        _root_wrench(pos[i], vel[i], quat[i], omega[i], k, inv, err_q, err, torque, qpos, qfrc, xmat)
+        _mj_step(model, data)
+        if warnings[bad_qacc] != 0:
+            return i, True
+        forces[i, :] = actuator_force
+        for c in range(ncon[0]):
+            for g in range(2):
+                side = side_of_geom[geoms[c, g]]
+                if side >= 0:
+                    contact[i, side] = True
+    return hi - 1, False
+
+
+@njit(cache=True)
+def _root_wrench(pos, vel, quat, omega, k, inv, err_q, err, torque, qpos, qfrc, xmat):
+    """:meth:`stimuli.physics.controller.RootWrench.apply`, call for call."""
+    force, q = qfrc.ctypes.data, qpos.ctypes.data
+    _sub3(force, pos.ctypes.data, q)
+    _scl3(force, force, k[0])
+    _add_to_scl3(force, vel.ctypes.data, k[1])
+    _neg_quat(inv.ctypes.data, q + 24)
+    _mul_quat(err_q.ctypes.data, quat.ctypes.data, inv.ctypes.data)
+    _quat2vel(err.ctypes.data, err_q.ctypes.data, 1.0)
+    _scl3(torque.ctypes.data, err.ctypes.data, k[2])
+    _add_to_scl3(torque.ctypes.data, omega.ctypes.data, k[3])
+    _mul_mat_t_vec3(force + 24, xmat.ctypes.data, torque.ctypes.data)
