@@ -12,6 +12,8 @@ contacts' geoms and (for the step's divergence check) the warning counters. Thei
 MuJoCo's ``mjData`` are found once per process on a probe model and checked there against the
 bindings' own values (:func:`layout`); :class:`Stepper` checks the contact count again at every
 return to Python, so a MuJoCo whose layout differs fails loudly instead of recording wrong contacts.
+MuJoCo's warnings reach the Python handler as before; a MuJoCo *error* inside a compiled run (none
+of the ragdolls raises one: a full arena, say, is a warning) would end the process, not raise.
 
 Example:
     >>> from stimuli.physics.stepper import layout
