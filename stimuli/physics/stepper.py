@@ -9,8 +9,8 @@ bit as the Python loop's; ``tests/test_physics_stepper.py`` checks it against th
 
 The loop reads three things that the Python bindings give only as copies: the contact count, the
 contacts' geoms and (for the step's divergence check) the warning counters. Their places in
-MuJoCo's ``mjData`` are found once per process on a probe model and checked there against the
-bindings' own values (:func:`layout`); :class:`Stepper` checks the contact count again at every
+MuJoCo's ``mjData`` (which differ between MuJoCo versions) are found once per process on a probe
+model and checked there against the bindings' own values (:func:`layout`); :class:`Stepper` checks the contact count again at every
 return to Python, so a MuJoCo whose layout differs fails loudly instead of recording wrong contacts.
 MuJoCo's warnings reach the Python handler as before; a MuJoCo *error* inside a compiled run (none
 of the ragdolls raises one: a full arena, say, is a warning) would end the process, not raise.
@@ -70,38 +70,57 @@ class Layout:
     geom_offset: int        # ``mjContact.geom``, from the contact's start
 
 
+# The probe: a box and a ball over a plane. Posed at these heights (box, ball) they touch the floor
+# with 5, 1, 4 and 0 contacts, an order no other counter in mjData follows (its maximum-use
+# statistics keep 5, its constraint rows are 4 per contact).
+_PROBE = ('<mujoco><worldbody><geom type="plane" size="2 2 .1"/>'
+          '<body><freejoint/><geom type="box" size=".1 .1 .1"/></body>'
+          '<body><freejoint/><geom type="sphere" size=".1"/></body></worldbody></mujoco>')
+_PROBE_HEIGHTS = ((0.09, 0.09), (1.0, 0.09), (0.09, 1.0), (1.0, 1.0))
+
+
 @functools.cache
 def layout() -> Layout:
-    """This MuJoCo's :class:`Layout`, found and checked on a box falling onto a plane.
+    """This MuJoCo's :class:`Layout`, found and checked on a probe model.
 
-    ``ncon`` follows the timer statistics (``mjdata.h``); ``arena`` is the field before ``qpos``,
-    found as the pointer field holding the bindings' ``qpos`` address followed by their ``qvel``'s; contacts start at the
-    arena (``mj_clearEfc``). Each is checked against the bindings before and after contacts appear.
+    ``arena`` is the pointer field before ``qpos`` (``mjdata.h``), found as the field holding the
+    bindings' ``qpos`` address followed by their ``qvel``'s; ``ncon`` is the one int before it that
+    equals the bindings' contact count in four poses of the probe (its place differs between
+    MuJoCo versions); contacts start at the arena (``mj_clearEfc``), which the bindings' own contact
+    array is checked against.
     """
     import mujoco
 
-    model = mujoco.MjModel.from_xml_string(
-        '<mujoco><worldbody><geom type="plane" size="1 1 .1"/><body pos="0 0 .3"><freejoint/>'
-        '<geom type="box" size=".1 .1 .1"/></body></worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(_PROBE)
     data = mujoco.MjData(model)
     base = data._address
-    timer = data.timer.duration
-    ncon_offset = _address(timer) + timer.strides[0] * len(timer) - base
-    qpos_field = next(offset for offset in range(ncon_offset, ncon_offset + 4096, 8)
-                      if (ctypes.c_uint64.from_address(base + offset).value,
-                          ctypes.c_uint64.from_address(base + offset + 8).value) == (_address(data.qpos), _address(data.qvel)))
-    arena_offset = qpos_field - 8
-    mujoco.mj_forward(model, data)
-    empty = ctypes.c_int.from_address(base + ncon_offset).value
-    for _ in range(400):
-        mujoco.mj_step(model, data)
-    geoms = data.contact.geom
-    arena = ctypes.c_uint64.from_address(base + arena_offset).value
-    found = Layout(ncon_offset, arena_offset, int(geoms.strides[0]), _address(geoms) - arena)
-    if (empty, ctypes.c_int.from_address(base + ncon_offset).value) != (0, data.ncon) or data.ncon < 2 \
-            or not 0 <= found.geom_offset < found.contact_stride:
+    arena_offset = _pointer_pair(base, _address(data.qpos), _address(data.qvel)) - 8
+    header = _view(base, np.int32, arena_offset // 4)     # the counters and statistics before the pointers
+    candidates, counts = None, []
+    for box, ball in _PROBE_HEIGHTS:
+        data.qpos[:] = [0, 0, box, 1, 0, 0, 0, 0.5, 0, ball, 1, 0, 0, 0]
+        mujoco.mj_forward(model, data)
+        counts.append(data.ncon)
+        matches = set(np.flatnonzero(header == data.ncon).tolist())
+        candidates = matches if candidates is None else candidates & matches
+        if data.ncon == 5:
+            geoms = data.contact.geom
+            arena = ctypes.c_uint64.from_address(base + arena_offset).value
+            contact_stride, geom_offset = int(geoms.strides[0]), _address(geoms) - arena
+    if counts != [5, 1, 4, 0] or len(candidates) != 1 or not 0 <= geom_offset < contact_stride:
         raise RuntimeError(f"MuJoCo {mujoco.__version__}: its mjData is not laid out as the compiled loop reads it")
-    return found
+    return Layout(4 * candidates.pop(), arena_offset, contact_stride, geom_offset)
+
+
+def _pointer_pair(base: int, first: int, second: int, limit: int = 1 << 22) -> int:
+    """Offset from ``base`` of the first 8-byte field holding ``first`` followed by ``second``."""
+    chunk = 128
+    for start in range(0, limit, 8 * (chunk - 1)):
+        words = _view(base + start, np.uint64, chunk)
+        hits = np.flatnonzero((words[:-1] == first) & (words[1:] == second))
+        if len(hits):
+            return start + 8 * int(hits[0])
+    raise RuntimeError("the bindings' qpos pointer is not in their mjData")
 
 
 def _address(array: np.ndarray) -> int:
