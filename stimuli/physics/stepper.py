@@ -2,16 +2,17 @@
 
 A 4-s walk is 17 000 MuJoCo steps, and around each ``mj_step`` (40–55 µs here) the Python loop
 spent another 25–45 µs setting the targets, the feed-forward and the root wrench and reading the
-forces and the foot contacts back: more than the physics itself. :func:`run_steps` does that work
-in machine code (numba), calling MuJoCo's own C functions (``mj_step`` and the same ``mju_*``
+forces and the foot contacts back: more than the physics itself. :meth:`Stepper.run` does that
+work in machine code (numba), calling MuJoCo's own C functions (``mj_step`` and the same ``mju_*``
 helpers :class:`stimuli.physics.controller.RootWrench` calls), so every number is the same to the
 bit as the Python loop's; ``tests/test_physics_stepper.py`` checks it against that loop.
 
 The loop reads three things that the Python bindings give only as copies: the contact count, the
 contacts' geoms and (for the step's divergence check) the warning counters. Their places in
 MuJoCo's ``mjData`` (which differ between MuJoCo versions) are found once per process on a probe
-model and checked there against the bindings' own values (:func:`layout`); :class:`Stepper` checks the contact count again at every
-return to Python, so a MuJoCo whose layout differs fails loudly instead of recording wrong contacts.
+model and checked there against the bindings' own values (:func:`layout`); :class:`Stepper`
+checks the contact count again at every return to Python, so a MuJoCo whose layout differs fails
+loudly instead of recording wrong contacts.
 MuJoCo's warnings reach the Python handler as before; a MuJoCo *error* inside a compiled run (none
 of the ragdolls raises one: a full arena, say, is a warning) would end the process, not raise.
 
@@ -32,7 +33,7 @@ import numpy as np
 from numba import njit, types
 from numba.core.types import ExternalFunction
 
-@functools.cache
+
 def _load_library() -> None:
     """Make the MuJoCo library the Python bindings loaded (the same copy, so the same global state,
     such as the warning handler) visible to the compiled code, which calls its functions by name."""
@@ -40,7 +41,7 @@ def _load_library() -> None:
     import mujoco
 
     folder = Path(mujoco.__file__).parent
-    found = sorted(folder.glob("libmujoco.so*")) + sorted(folder.glob("libmujoco*.dylib")) + sorted(folder.glob("mujoco.dll"))
+    found = [path for pattern in ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll") for path in sorted(folder.glob(pattern))]
     if not found:
         raise RuntimeError(f"no MuJoCo library next to {mujoco.__file__}")
     llvmlite.binding.load_library_permanently(str(found[0]))
@@ -148,7 +149,8 @@ class Stepper:
         arena = ctypes.c_uint64.from_address(data._address + where.arena_offset).value
         capacity = (model.narena - where.geom_offset - 8) // where.contact_stride
         words = where.contact_stride // 4
-        geoms = _view(arena, np.int32, capacity * words).reshape(capacity, words)[:, where.geom_offset // 4:where.geom_offset // 4 + 2]
+        first = where.geom_offset // 4
+        geoms = _view(arena, np.int32, capacity * words).reshape(capacity, words)[:, first:first + 2]   # each contact's geom pair
         self._ncon = _view(data._address + where.ncon_offset, np.int32, 1)
         self._model, self._data = model, data   # the loop holds their raw addresses: keep them alive
         no_ff = np.zeros((0, model.nu))
