@@ -15,8 +15,9 @@ def setup():
     from stimuli.motion.generate import GaitParams, generate
     from stimuli.physics.controller import Gains, set_root_damping
     from stimuli.physics.retarget import prepare
-    from stimuli.physics.simulate import foot_geoms, ground_offset, steps_per_frame
+    from stimuli.physics.simulate import _mujoco_warning, foot_geoms, ground_offset, steps_per_frame
 
+    mujoco.set_mju_user_warning(_mujoco_warning)   # as simulate() does: no MUJOCO_LOG.TXT in the working directory
     body = fit_body("F", 1.61, 24.42)
     walk = generate(GaitParams(gait="walk", cadence_spm=112, speed_mps=1.2), height_m=1.61, fps=30, cycles=2)
     ref, _, model, gains = prepare(walk, body)
