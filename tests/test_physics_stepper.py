@@ -38,10 +38,10 @@ def setup():
 
 def _start(model, target):
     from stimuli.physics.simulate import _initial_state
+    from stimuli.physics.swing import actuator_qpos
 
     data = mujoco.MjData(model)
-    dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
-    _initial_state(model, data, target, dof_adr)
+    _initial_state(model, data, target, actuator_qpos(model) - 1)
     return data
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from stimuli.physics.controller import Gains, RootWrench, set_root_damping
 from stimuli.physics.stepper import Stepper
-from stimuli.physics.swing import UPDATE_STEPS, SwingController, swing_placement
+from stimuli.physics.swing import UPDATE_STEPS, SwingController, actuator_qpos, swing_placement
 
 MIN_RATE_HZ = 500.0
 # 4 kHz: the stiff PD legs on soft contacts are not converged at 1 kHz — from 1 to 2 to 4 to
@@ -103,7 +103,7 @@ def ground_offset(model, ref, n: int = 60) -> float:
         return 0.0
 
     data = mujoco.MjData(model)
-    dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
+    dof_adr = actuator_qpos(model) - 1
     feet = [g for side in foot_geoms(model) for g in side]
     target = ref.sample(np.linspace(0, ref.period, n, endpoint=False))
     lows = []
@@ -161,7 +161,7 @@ def simulate(model, ref, gains: Gains, warmup_loops: int = 1, rate_hz: float = D
     lift = ground_offset(model, ref)
     target = ref.sample(np.arange(n_steps) * dt)
     target["root_pos"][:, 1] += lift
-    dof_adr = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)]) - 1
+    dof_adr = actuator_qpos(model) - 1
     pelvis = model.body("pelvis").id
     trunk = model.body("spine").id
     side_of_geom = np.full(model.ngeom, -1)      # 0 left foot or toes, 1 right, -1 neither
