@@ -24,7 +24,7 @@ from stimuli.errors import StimuliError
 from stimuli.render.clip import Look
 from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, with_all_columns, write_manifest
 from stimuli.render.settings import inputs_hash, look_for
-from stimuli.render.video import check_interrupted, install_interrupt_handler
+from stimuli.render.video import check_interrupted, install_interrupt_handler, was_interrupted
 from stimuli.workers import process_pool
 
 SOURCES = ("protocol", "procedural")
@@ -199,8 +199,16 @@ def render_protocol(protocol_path, out_dir, resolution=None, fps=None, limit=Non
                     report.manifest = write_manifest(out_dir, _ordered(rows, order))
                 else:
                     report.failed[sid] = error
-        except BaseException:
+            if previous_handler is not None:
+                check_interrupted()   # one that came during the last clip, and was lost
+        except BaseException as exc:
             _drop_unrecorded(todo, rows)
+            interrupted = previous_handler is not None and was_interrupted()
+            if interrupted and not isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                # The user's Ctrl-C, come back as another error: ctypes reports an interrupt raised while
+                # it converts an argument (PyOpenGL's) as ctypes.ArgumentError, and Ctrl-C reaches the
+                # whole process group, so the decode check's ffmpeg can die of it before Python raises it.
+                raise KeyboardInterrupt from exc
             raise
         finally:
             if previous_handler is not None:

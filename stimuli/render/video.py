@@ -75,6 +75,11 @@ def install_interrupt_handler():
     return signal.signal(signal.SIGINT, handler)
 
 
+def was_interrupted() -> bool:
+    """Whether SIGINT came since :func:`install_interrupt_handler`, even if its exception was lost."""
+    return _INTERRUPTED.is_set()
+
+
 def check_interrupted() -> None:
     """Raise the interrupt, or the parent's death in a worker, that an at-fork hook swallowed."""
     if _INTERRUPTED.is_set():
