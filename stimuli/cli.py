@@ -11,11 +11,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import textwrap
 
 from analysis.errors import AnalysisError
 from stimuli.errors import StimuliError
+from stimuli.interrupts import install_interrupt_handler, was_interrupted
 
 # Modules that add commands (`--help` lists the commands by STAGES below).
 COMMAND_MODULES = [
@@ -120,24 +122,35 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    previous_handler = install_interrupt_handler()
     try:
         return int(args.func(args) or 0)
-    except (StimuliError, AnalysisError) as exc:
+    except BaseException as exc:
+        # Once Ctrl-C has come, whatever ends the command is the interrupt (see stimuli.interrupts).
+        if isinstance(exc, KeyboardInterrupt) or (previous_handler is not None and was_interrupted()
+                                                  and not isinstance(exc, SystemExit)):
+            print("shapemotion: interrupted", file=sys.stderr)
+            return 130
+        return _exit_code_for(exc)
+    finally:
+        if previous_handler is not None:
+            signal.signal(signal.SIGINT, previous_handler)
+
+
+def _exit_code_for(exc: BaseException) -> int:
+    """The exit code of a command that raised ``exc``, its message printed; raises what is a bug."""
+    if isinstance(exc, (StimuliError, AnalysisError)):
         print_user_error(exc)
         return 2
-    except BrokenPipeError:  # output piped into `head` and the like: stop quietly
+    if isinstance(exc, BrokenPipeError):  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except OSError as exc:
+    if isinstance(exc, OSError) and exc.filename is not None:
         # A safety net: commands check their output paths up front, but a path the system refuses
         # (a file where a folder should be, no permission, a full disk) is the user's to fix too.
-        if exc.filename is None:
-            raise
         print_user_error(f"{exc.filename}: {exc.strerror or exc}")
         return 2
-    except KeyboardInterrupt:
-        print("shapemotion: interrupted", file=sys.stderr)
-        return 130
+    raise exc
 
 
 if __name__ == "__main__":

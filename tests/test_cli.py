@@ -65,6 +65,41 @@ def test_an_error_is_one_line_in_a_log_and_wrapped_between_words_on_a_terminal(t
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("interrupted, code", [(True, 130), (False, None)])
+def test_ctrl_c_that_comes_back_as_another_error_is_the_interrupt(interrupted, code, run_cli, monkeypatch):
+    """PyOpenGL's calls go through ctypes, which reports an interrupt raised while it converts an
+    argument as ``ctypes.ArgumentError``: after Ctrl-C that is exit 130, without it a bug (traceback)."""
+    import ctypes
+    import signal
+
+    from stimuli.commands import render_cmd
+
+    def preview(args):
+        if interrupted:
+            try:                        # the interrupt, turned into ctypes' error by the GL call
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt:
+                pass
+        raise ctypes.ArgumentError("argument 2: KeyboardInterrupt: ")
+
+    monkeypatch.setattr(render_cmd, "run_preview", preview)
+    if code is None:
+        with pytest.raises(ctypes.ArgumentError):
+            run_cli("preview", "--stepping", "--body", "sex=M,height=1.8,bmi=25", "--out", "x.mp4")
+    else:
+        assert run_cli("preview", "--stepping", "--body", "sex=M,height=1.8,bmi=25", "--out", "x.mp4") == (130, "", "shapemotion: interrupted\n")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_the_interrupt_module_examples_run():
+    import doctest
+
+    from stimuli import interrupts
+
+    result = doctest.testmod(interrupts)
+    assert result.failed == 0 and result.attempted >= 5
+
+
 def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     code, out, _ = run_cli("demo", "--out", tmp_path, "--quick")
     assert code == 0

@@ -21,10 +21,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from stimuli.errors import StimuliError
+from stimuli.interrupts import check_interrupted, install_interrupt_handler, was_interrupted
 from stimuli.render.clip import Look
 from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, with_all_columns, write_manifest
 from stimuli.render.settings import inputs_hash, look_for
-from stimuli.render.video import check_interrupted, install_interrupt_handler, was_interrupted
 from stimuli.workers import process_pool
 
 SOURCES = ("protocol", "procedural")
@@ -361,14 +361,12 @@ def _ordered(rows: dict, order: list[str]) -> list[dict]:
 
 
 def _worker_signals() -> None:
-    """In a worker: make Ctrl-C stick (see ``video.install_interrupt_handler``).
+    """In a worker: make Ctrl-C stick (see ``stimuli.interrupts``).
 
     SIGTERM already raises SystemExit there (``stimuli.workers``): on Ctrl-C a worker that was idle
     dies of the interrupt and the pool terminates the others, and when this process dies its workers
     get SIGTERM too; either way a clip being written deletes its temporary folder.
     """
-    from stimuli.render.video import install_interrupt_handler
-
     install_interrupt_handler()
 
 

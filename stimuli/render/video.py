@@ -11,16 +11,15 @@ import errno
 import hashlib
 import os
 import shutil
-import signal
 import tempfile
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from stimuli.errors import StimuliError
-from stimuli.workers import at_forced_exit, check_orphaned
+from stimuli.interrupts import check_interrupted
+from stimuli.workers import at_forced_exit
 
 CRF = 20                   # visually lossless for these flat-shaded scenes
 PRESET = "superfast"       # ~9 ms per 720p frame (veryfast: ~17 ms for files 2.4× smaller, ~0.8 MB per 4 s)
@@ -51,40 +50,6 @@ def sha256_file(path: str | Path) -> str:
 
 def _temp_name(path: Path, suffix: str) -> Path:
     return path.with_name(f".{path.stem}.{os.getpid()}.tmp{suffix}")
-
-
-_INTERRUPTED = threading.Event()
-
-
-def install_interrupt_handler():
-    """Make Ctrl-C stick: SIGINT sets a flag as well as raising KeyboardInterrupt.
-
-    An interrupt that lands where Python ignores exceptions (the at-fork hooks that run while
-    ffmpeg is being started print "Exception ignored" and go on) is otherwise lost; the frame loop
-    of :func:`write_video` checks the flag and stops at the next frame. Returns the previous
-    handler (for ``signal.signal``), or None outside the main thread, where none can be installed.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    _INTERRUPTED.clear()
-
-    def handler(signum, frame):
-        _INTERRUPTED.set()
-        raise KeyboardInterrupt
-
-    return signal.signal(signal.SIGINT, handler)
-
-
-def was_interrupted() -> bool:
-    """Whether SIGINT came since :func:`install_interrupt_handler`, even if its exception was lost."""
-    return _INTERRUPTED.is_set()
-
-
-def check_interrupted() -> None:
-    """Raise the interrupt, or the parent's death in a worker, that an at-fork hook swallowed."""
-    if _INTERRUPTED.is_set():
-        raise KeyboardInterrupt
-    check_orphaned()
 
 
 def check_size(width: int, height: int) -> None:
