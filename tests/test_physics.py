@@ -531,7 +531,9 @@ def test_knee_flexion_is_the_joint_centre_angle_and_mass_barely_moves_it(walk, b
     assert abs(c["knee_flexion_peak_deg"] - curves["lo"]["knee_flexion_peak_deg"]) < 0.2
 
 
-@pytest.mark.parametrize("module", ["stimuli.physics.analysis_fig7", "stimuli.physics.controller", "stimuli.physics.feedforward", "stimuli.physics.inertia", "stimuli.physics.own_body",
+@pytest.mark.parametrize("module", ["stimuli.physics.analysis_fig7", "stimuli.physics.attainable", "stimuli.physics.checks",
+                                    "stimuli.physics.controller", "stimuli.physics.feedforward", "stimuli.physics.inertia",
+                                    "stimuli.physics.own_body",
                                     "stimuli.physics.protocol_step", "stimuli.physics.retarget", "stimuli.physics.stepper", "stimuli.physics.swing",
                                     "stimuli.physics.tune", "stimuli.motion.loop", "stimuli.motion.quat", "stimuli.motion.motion",
                                     "stimuli.motion.skeleton", "stimuli.motion.normative", "stimuli.motion.footfix", "stimuli.motion.retarget",

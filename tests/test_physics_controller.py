@@ -177,6 +177,38 @@ def test_reference_flight_fraction_of_a_jog_is_its_flight_phases():
     assert 0.05 < reference_flight_fraction(jog) < 0.4
 
 
+def test_a_real_run_is_within_reach_under_gravity_and_a_mix_of_runs_is_not(jog):
+    """A body that follows the reference's centre of mass where a floor that only pushes allows it
+    (``stimuli.physics.attainable``) flies as the generated jog and a real run do, within 4 points;
+    a run whose centre of mass is braked harder than gravity in late stance (as the men's capture
+    average is: two runs of different flight, averaged) asks the floor to pull, and flies longer."""
+    from stimuli.bodies import fit_body
+    from stimuli.motion.bvh import read_bvh
+    from stimuli.motion.loop import capture_loop
+    from stimuli.physics.attainable import com_heights, pushing_floor_flight, reference_under_gravity
+    from stimuli.physics.retarget import on_period, prepare, reference_flight_fraction
+
+    body = fit_body("M", 1.75, 23.0)
+    run = capture_loop(read_bvh(MOCAP / "cmu_35_17_run.bvh"), "jog").resample(30.0)
+    for motion in (jog, run):
+        ref, _, model, _ = prepare(motion, body)
+        physics = reference_under_gravity(motion, ref, model)
+        assert abs(physics["flight_fraction"] - reference_flight_fraction(motion)) < 0.04, physics
+        assert physics["pull_with_foot_down_mps_per_s"] < 0.15 and physics["highest_over_m"] < 0.01
+    # The same run, its centre of mass pulled down 3 cm over the last third of every stance.
+    from stimuli.motion.contact import foot_contacts
+
+    ref, _, model, _ = prepare(run, body)
+    com, rate = com_heights(ref, model)
+    down = foot_contacts(on_period(run, len(com))).down
+    down = down["l"] | down["r"]
+    braked = com.copy()
+    for start in np.flatnonzero(down & ~np.roll(down, -1)):      # the last stance sample before take-off
+        braked[start - 6:start + 1] -= 0.03 * np.linspace(0, 1, 7) ** 2
+    own, mixed = pushing_floor_flight(com, rate, down), pushing_floor_flight(braked, rate, down)
+    assert mixed["pull_with_foot_down_mps_per_s"] > 0.5 and mixed["flight_fraction"] > own["flight_fraction"] + 0.02
+
+
 def _cmu_walk(cycles: int):
     from stimuli.motion.bvh import read_bvh
     from stimuli.motion.loop import make_loop

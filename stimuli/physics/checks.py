@@ -55,7 +55,26 @@ def flight_warning(report: dict, gait: str) -> str | None:
     pd_only = "controller" in report and not report["controller"].get("feedforward")
     hint = "; the PD + feed-forward controller (--controller feedforward) follows flight more closely" if pd_only else ""
     return (f"no foot on the floor for {100 * flight:.1f} % of the {gait} against {100 * reference:.1f} % in its "
-            f"reference (the bound: {bound}{read}){verdict}{hint}; {SEE}")
+            f"reference (the bound: {bound}{read}){verdict}{hint}{_out_of_reach(report, gait, reference)}; {SEE}")
+
+
+def _out_of_reach(report: dict, gait: str, reference: float) -> str:
+    """The clause saying that the reference's own flight is out of reach of a body that follows it, when it is.
+
+    >>> physics = {"flight_fraction": 0.393, "pull_mps_per_s": 1.74, "pull_with_foot_down_mps_per_s": 0.88}
+    >>> _out_of_reach({"reference_under_gravity": physics}, "jog", 0.300)
+    '; the flight of its reference is out of reach: its centre of mass falls faster than gravity (the floor would have to pull 1.74 m/s per second, 0.88 of it with a foot down), and a body that follows it where a floor that only pushes allows is off the floor for 39.3 %'
+    >>> _out_of_reach({"reference_under_gravity": {"flight_fraction": 0.31}}, "jog", 0.300)
+    ''
+    """
+    physics = report.get("reference_under_gravity") or {}
+    attainable = physics.get("flight_fraction")
+    if attainable is None or flight_excess(gait, attainable, reference) == 0.0:
+        return ""
+    return (f"; the flight of its reference is out of reach: its centre of mass falls faster than gravity (the floor would "
+            f"have to pull {physics.get('pull_mps_per_s', 0.0):.2f} m/s per second, "
+            f"{physics.get('pull_with_foot_down_mps_per_s', 0.0):.2f} of it with a foot down), and a body that "
+            f"follows it where a floor that only pushes allows is off the floor for {100 * attainable:.1f} %")
 
 
 def tracking_warning(report: dict, gait: str) -> str | None:

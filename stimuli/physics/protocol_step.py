@@ -441,6 +441,7 @@ def _summary(reports: list[dict], path: Path) -> None:
              "root_drift_vertical_max_m": r["root_drift"]["vertical_max_m"],
              "root_tilt_mean_deg": r.get("root_tilt_deg", {}).get("mean"), "flight_fraction": r.get("flight_fraction"),
              "reference_flight_fraction": r.get("reference_flight_fraction"),
+             "reference_flight_under_gravity": r.get("reference_under_gravity", {}).get("flight_fraction"),
              "flight_fraction_contact_model": r.get("flight_fraction_contact_model"),
              "controller": "feedforward" if r.get("controller", {}).get("feedforward") else "pd",
              "torques_over_limit": over_limit(r.get("torque_peaks_nm", {})),

@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from stimuli.errors import StimuliError
 from stimuli.physics import inertia
+from stimuli.physics.attainable import reference_under_gravity
 from stimuli.physics.controller import Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit, torque_limit_sourced
 from stimuli.physics.output import joint_rms_difference, to_motion
 from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
@@ -351,6 +352,8 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     motion, resampled = at_reference_rate(motion)
     motion, onto_rig_here = on_reference_rig(motion, reference_body or body)
     ref, ragdoll, model, gains = prepare(motion, body, weight, gains, rate_hz, toe_segment)
+    # Read on the motion as given, before the toes' grounding moves its root.
+    under_gravity = reference_under_gravity(motion, ref, model)
     if swing_placement is None:
         swing_placement = bool(feedforward) and motion_gait(motion) == "walk"
     toes = bool(feedforward) and motion_gait(motion) != "walk" if toes is None else bool(toes)
@@ -384,6 +387,9 @@ def retarget(motion, body, weight_kg: float | None = None, reference_body=None, 
     if toe_changes is not None:
         report["reference_on_toes"] = toe_changes
     report["reference_flight_fraction"] = reference_flight_fraction(motion)
+    # What a body the floor only pushes can make of the reference (an average of runs can ask the
+    # floor to pull: its own flight share is then out of reach of a body that follows it).
+    report["reference_under_gravity"] = under_gravity
     # The same detector on the simulated motion: box contacts and the contact model read a run's flight
     # differently (Bandai's tired jog: 0.41 by the boxes, 0.13 by the contact model, its reference 0.14).
     report["flight_fraction_contact_model"] = reference_flight_fraction(out) if out is not None else None
