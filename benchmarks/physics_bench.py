@@ -27,7 +27,9 @@ and the root spring's forward tow (issue 21's "single-support sag").
 
 ``--ballistic MOTION ...`` (NoCOM averages as .npz, or runs under ``../shared/data/mocap``) prints
 each run's flight share by the contact model beside the share a body under gravity alone would
-have, leaving and landing as the run does (issue 21's men's capture-average jog).
+have, leaving and landing as the run does, and the share of a body that follows the run's centre
+of mass wherever a floor that only pushes allows it, with the pull the run asks of the floor
+(issue 21's men's capture-average jog).
 
     python benchmarks/physics_bench.py [--controllers OUT | --captures OUT | --single-support CAPTURE ... |
                                         --ballistic MOTION ...]
@@ -96,7 +98,7 @@ def compare_controllers(out: str, protocol: str = "protocols/exp2_com_vs_average
 
     from stimuli.physics.protocol_step import run_protocol
 
-    print("controller actor gait ref_flight sim_flight sim_flight_contact_model tracking_deg b_mm weight_gap_kg gain_scale knee_swing_peak "
+    print("controller actor gait ref_flight ref_flight_under_gravity sim_flight sim_flight_contact_model tracking_deg b_mm weight_gap_kg gain_scale knee_swing_peak "
           "knee_stance_peak over_limit(dof:peak/limit) fell wall_s cpu_s")
     for name, ff in (("pd", False), ("pd_ff", True)):
         start, cpu = time.perf_counter(), _cpu_s(resource)
@@ -111,7 +113,8 @@ def compare_controllers(out: str, protocol: str = "protocols/exp2_com_vs_average
             over = [f"{d}:{v['peak']:.0f}/{v['limit']:.0f}" for d, v in r.get("torque_peaks_nm", {}).items()
                     if v["peak"] > v["limit"]]
             gap = r["body"]["weight_kg"] - r["reference_body"]["weight_kg"]
-            print(f"{name} {r['actor']} {r['gait']} {r.get('reference_flight_fraction')} {r['flight_fraction']} "
+            print(f"{name} {r['actor']} {r['gait']} {r.get('reference_flight_fraction')} "
+                  f"{r.get('reference_under_gravity', {}).get('flight_fraction')} {r['flight_fraction']} "
                   f"{r.get('flight_fraction_contact_model')} "
                   f"{r['tracking_rms_deg_overall']} {1000 * r['b_m']:.2f} {gap:+.1f} {r.get('gain_choice', {}).get('scale', 1)} "
                   f"{r.get('knee_flexion_peak_deg')} {r.get('knee_flexion_stance_peak_deg')} {','.join(over) or '-'} "
@@ -197,43 +200,37 @@ def single_support_table(captures: list[str]) -> None:
             print(name, group, " ".join(f"{key} {value:.4g}" for key, value in means.items()), flush=True)
 
 
-def ballistic_flight(motion, body, oversample: int = 8) -> dict[str, float]:
-    """The motion's flight share by the contact model (``contact_model``) beside the share it would
-    have under gravity alone (``ballistic``): each flight phase lasting as long as a body leaving
-    the floor with the reference's centre of mass height and vertical speed at take-off takes to
-    fall back to its centre of mass height at landing. The reference is posed on the ragdoll of
-    ``body`` (its segment masses) at ``oversample`` × its frame rate. A real capture's two agree
-    within a few points; a motion whose flight is not ballistic (an average of runs with different
-    flights) cannot have its own flight share under physics."""
-    import mujoco
+def ballistic_flight(motion, body) -> dict[str, float]:
+    """The motion's flight share by the contact model (``contact_model``) beside two shares under
+    physics, its reference posed on the ragdoll of ``body`` (its segment masses) at 8 × its frame
+    rate: ``ballistic``, each flight phase lasting as long as a body leaving the floor with the
+    reference's centre of mass height and vertical speed at take-off takes to fall back to its
+    centre of mass height at landing; and ``pushing_floor`` with the pull it needs
+    (:func:`stimuli.physics.attainable.pushing_floor_flight`: the body follows the centre of mass
+    wherever a floor that only pushes allows it). A real capture's three agree within a few points;
+    a motion whose flight is not ballistic (an average of runs with different flights) cannot have
+    its own flight share under physics."""
     import numpy as np
 
     from stimuli.motion.contact import foot_contacts
     from stimuli.motion.footfix import contact_runs
+    from stimuli.physics.attainable import com_heights, pushing_floor_flight
     from stimuli.physics.controller import motion_gait
     from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
     from stimuli.physics.reference import build_reference
     from stimuli.physics.retarget import finely_sampled
-    from stimuli.physics.swing import actuator_qpos
 
     toes = TOES_BY_GAIT[motion_gait(motion)]
     ref, ragdoll = build_reference(motion, body, lambda axes: build_ragdoll(body, None, axes, toes=toes))
     ones = {d: 1.0 for d in ragdoll.dof_names}
-    model = compile_model(ragdoll, 1e-3, ones, ones)
-    data, qadr = mujoco.MjData(model), actuator_qpos(model)
-    rate, pelvis = ref.fps * oversample, model.body("pelvis").id
-    pose = ref.sample(np.arange(ref.n_frames * oversample) / rate)
-    com = np.empty(len(pose["q"]))
-    for i in range(len(com)):
-        data.qpos[:3], data.qpos[3:7], data.qpos[qadr] = pose["root_pos"][i], pose["root_quat"][i], pose["q"][i]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        com[i] = data.subtree_com[pelvis, 1]
+    com, rate = com_heights(ref, compile_model(ragdoll, 1e-3, ones, ones))
     speed = (np.roll(com, -1) - np.roll(com, 1)) * rate / 2          # the clip is a loop
     down = foot_contacts(finely_sampled(motion, rate)).down
-    flight = ~(down["l"] | down["r"])
-    if len(flight) != len(com):
-        raise ValueError(f"contacts have {len(flight)} samples, the pose {len(com)}")
+    down = down["l"] | down["r"]
+    if len(down) != len(com):
+        raise ValueError(f"contacts have {len(down)} samples, the pose {len(com)}")
+    pushing = pushing_floor_flight(com, rate, down)
+    flight = ~down
     n, extra = len(flight), 0.0
     shift, phases = contact_runs(flight, cyclic=True)    # rolled to start on the floor
     com, speed = np.roll(com, -shift), np.roll(speed, -shift)
@@ -242,7 +239,9 @@ def ballistic_flight(motion, body, oversample: int = 8) -> dict[str, float]:
         # Falling and already below its landing height at take-off, a ballistic body lands at once.
         fall = max(0.0, (v0 + np.sqrt(max(v0 ** 2 + 2 * 9.81 * (y0 - y1), 0.0))) / 9.81)
         extra += fall - (stop - start + 1) / rate
-    return {"contact_model": float(flight.mean()), "ballistic": float(flight.mean() + extra * rate / n)}
+    return {"contact_model": float(flight.mean()), "ballistic": float(flight.mean() + extra * rate / n),
+            "pushing_floor": pushing["flight_fraction"], "pull": pushing["pull_mps_per_s"],
+            "pull_foot_down": pushing["pull_with_foot_down_mps_per_s"], "highest_over_m": pushing["highest_over_m"]}
 
 
 def ballistic_table(paths: list[str]) -> None:
@@ -264,8 +263,10 @@ def ballistic_table(paths: list[str]) -> None:
             motion = motion.resample(30.0) if motion.fps > 30 else motion
             body = fit_body("M", 1.75, 23.0)
         shares = ballistic_flight(motion, body)
-        print(f"{name} flight {shares['contact_model']:.3f} (contact model), {shares['ballistic']:.3f} under gravity alone",
-              flush=True)
+        print(f"{name} flight {shares['contact_model']:.3f} (contact model), {shares['ballistic']:.3f} under gravity "
+              f"alone, {shares['pushing_floor']:.3f} on a floor that only pushes ({100 * shares['highest_over_m']:.1f} cm "
+              f"over its centre of mass; pull {shares['pull']:.2f} m/s per s, {shares['pull_foot_down']:.2f} with a foot "
+              "down)", flush=True)
 
 
 def _cpu_s(resource) -> float:
