@@ -67,7 +67,7 @@ def pushing_floor_flight(com: np.ndarray, rate: float, down: np.ndarray, laps: i
                 y, v = com[i], speed[i]
             air[lap, i], over[lap, i] = not attached, y - com[i]
     air, over = air[1:], over[1:]
-    pull = np.clip(-G - accel, 0.0, None) * dt / (n * dt)     # m/s of pull per second of motion
+    pull = np.clip(-G - accel, 0.0, None) * dt / (n * dt)     # each sample's m/s of pull, per second of loop
     return {"flight_fraction": round(float(air.mean()), 4), "highest_over_m": round(float(max(over.max(), 0.0)), 4),
             "pull_mps_per_s": round(float(pull.sum()), 3),
             "pull_with_foot_down_mps_per_s": round(float(pull[down].sum()), 3)}
