@@ -64,7 +64,6 @@ def test_an_error_is_one_line_in_a_log_and_wrapped_between_words_on_a_terminal(t
     assert " ".join(terminal.getvalue().split()) == f"shapemotion: error: {message}"
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("interrupted, code", [(True, 130), (False, None)])
 def test_ctrl_c_that_comes_back_as_another_error_is_the_interrupt(interrupted, code, run_cli, monkeypatch):
     """PyOpenGL's calls go through ctypes, which reports an interrupt raised while it converts an
@@ -100,6 +99,7 @@ def test_the_interrupt_module_examples_run():
     assert result.failed == 0 and result.attempted >= 5
 
 
+@pytest.mark.slow
 def test_demo_runs_the_whole_chain(tmp_path, run_cli):
     code, out, _ = run_cli("demo", "--out", tmp_path, "--quick")
     assert code == 0
