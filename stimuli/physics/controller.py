@@ -268,14 +268,25 @@ class RootWrench:
 # 221:187–194, abstract (PMC3406365): maximal voluntary isometric moments of 20 men's toe flexors
 # 6.3 ± 2.6 to 14.2 ± 5.8 N·m over ankle and toe angles, the largest at 25–45° of toe dorsiflexion,
 # the push-off's: 14.2 N·m (not scaled: the abstract gives no per-kg figure).
+# Trunk lateral bending (Z): Huang et al. (2000), "Trunk muscle strength in eccentric and concentric
+# lateral flexion", Eur J Appl Physiol 83(6):573–577 (doi:10.1007/s004210000307),
+# abstract: 12 men, static lateral flexion torque 80–172 N·m over five positions from 20° to −20°
+# (concentric 66–140, eccentric 211–218 N·m): 172 N·m, the largest static figure (not scaled: the
+# abstract gives no per-kg figure).
+# Hip rotation (Y): Johnson & Hoffman (2010), J Sport Rehabil 19:12–20: 15 young men (81.3 kg),
+# average isometric torque over a 6-s contraction, normalised to body mass, external rotation 0.52
+# and 0.535 N·m/kg at 10° and 40° of hip flexion (internal 0.385 and 0.47), the hip angles of gait;
+# read as N·m for 81.3 kg (42.3, 43.5; 31.3, 38.2) in the AnyBody strength-studies compilation
+# (github.com/AnyBody/strength-studies, convert-matlab-data/isometric.parquet, rows of study ids 58
+# and 59), not in the paper: 0.535 × 70.4 kg = 38 N·m.
 # The isokinetic figures (hip abduction, ankle inversion, elbow, shoulder rotation and adduction) are
 # concentric peaks, below an isometric maximum; every figure was read in a reachable abstract or
 # table (not the paper itself where only an abstract is named), none is in ../shared/seeds.
 #
-# PROVENANCE NOT CHECKED for the remaining axes, spine lateral bending and axial rotation, hip rotation
-# and ankle rotation: they were rounded from memory of Harbo, Brincks & Andersen (2012), Eur J Appl
-# Physiol 112:267–275 (isometric Biodex peak torques, sex-specific regressions on age, height and body
-# mass; only its abstract is reachable) and have no published figure behind them here.
+# PROVENANCE NOT CHECKED for the two remaining axes, the trunk's axial rotation and the ankle's
+# rotation about the vertical: they were rounded from memory of Harbo, Brincks & Andersen (2012), Eur
+# J Appl Physiol 112:267–275 (isometric Biodex peak torques, sex-specific regressions on age, height
+# and body mass; only its abstract is reachable) and have no published figure behind them here.
 NORM_BODY_MASS_KG = 23.0 * 1.75**2                            # the base character
 NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * NORM_BODY_MASS_KG * 1.75  # its weight (N) × height (m)
 ANDERSON_2007_C1 = {"hip": 0.161, "knee": 0.163, "ankle": 0.095}
@@ -288,14 +299,17 @@ SHOULDER_ADDUCTION_1989_NM = 48.0
 SHOULDER_INTERNAL_ROTATION_2011_NM = (15 * 59.5 + 18 * 65.3) / 33
 CHAFFIN_1999_TORSO_EXTENSION_NM = 288.0
 GOLDMANN_2012_MTP_FLEXION_NM = 14.2
+HUANG_2000_TRUNK_LATERAL_FLEXION_NM = 172.0
+JOHNSON_2010_HIP_EXTERNAL_ROTATION_NM_PER_KG = 0.535
 TORQUE_LIMITS_NM = {
-    "spine": {"X": CHAFFIN_1999_TORSO_EXTENSION_NM, "Z": 200.0, "Y": 100.0},
+    "spine": {"X": CHAFFIN_1999_TORSO_EXTENSION_NM, "Z": HUANG_2000_TRUNK_LATERAL_FLEXION_NM, "Y": 100.0},
     "neck": dict(NECK_ISOMETRIC_2014_NM),
     "shoulder": {"X": float(round(SHOULDER_FLEXION_STATIC_NM)), "Z": SHOULDER_ADDUCTION_1989_NM,
                  "Y": float(round(SHOULDER_INTERNAL_ROTATION_2011_NM))},
     "elbow": {"": float(round(LATEGAN_2003_ELBOW_FLEXION_NM_PER_KG * NORM_BODY_MASS_KG))},
     "hip": {"X": float(round(ANDERSON_2007_C1["hip"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
-            "Z": float(round(SUGIMOTO_2014_HIP_ABDUCTION_NM_PER_KG * NORM_BODY_MASS_KG)), "Y": 80.0},
+            "Z": float(round(SUGIMOTO_2014_HIP_ABDUCTION_NM_PER_KG * NORM_BODY_MASS_KG)),
+            "Y": float(round(JOHNSON_2010_HIP_EXTERNAL_ROTATION_NM_PER_KG * NORM_BODY_MASS_KG))},
     "knee": {"": float(round(ANDERSON_2007_C1["knee"] * NORM_BODY_WEIGHT_HEIGHT_NM))},
     "ankle": {"X": float(round(ANDERSON_2007_C1["ankle"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
               "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)), "Y": 40.0},
@@ -304,7 +318,7 @@ TORQUE_LIMITS_NM = {
 # The axes whose limit has a published figure behind it (above); the report says which these are.
 SOURCED_LIMITS = {("hip", "X"), ("hip", "Z"), ("knee", ""), ("ankle", "X"), ("ankle", "Z"), ("elbow", ""),
                   ("neck", "X"), ("neck", "Z"), ("neck", "Y"), ("shoulder", "X"), ("shoulder", "Z"),
-                  ("shoulder", "Y"), ("spine", "X"), ("toe", "")}
+                  ("shoulder", "Y"), ("spine", "X"), ("spine", "Z"), ("hip", "Y"), ("toe", "")}
 
 
 def torque_limit(dof: str) -> float:
@@ -320,7 +334,7 @@ def torque_limit(dof: str) -> float:
 def torque_limit_sourced(dof: str) -> bool:
     """Whether the limit of a ragdoll DoF has a published figure behind it (:data:`SOURCED_LIMITS`).
 
-    >>> torque_limit_sourced("knee.L"), torque_limit_sourced("neck:Y"), torque_limit_sourced("spine:Z")
+    >>> torque_limit_sourced("knee.L"), torque_limit_sourced("hip.R:Y"), torque_limit_sourced("spine:Y")
     (True, True, False)
     """
     return _joint_axis(dof) in SOURCED_LIMITS
