@@ -168,6 +168,8 @@ def test_gains_are_fixed_across_bodies_and_the_report_shows_the_controller(walk,
         assert {"knee.L", "hip.R:X", "hip.R:Z", "hip.L:Y", "ankle.L:Z", "elbow.R", "spine:X", "spine:Z", "neck:Y",
                 "shoulder.L:X", "toe.R"} <= sourced
         assert not sourced & {"spine:Y", "ankle.L:Y", "ankle.R:Y"}   # the unchecked axes say so
+        assert r["torque_peaks_nm"]["spine:Z"]["source"].startswith("Huang et al. 2000")
+        assert r["torque_peaks_nm"]["spine:Y"]["source"].startswith("not checked")
         assert not r["fell"]
     assert reports[0]["b_m"] == 0.0 and reports[1]["b_m"] > 0.0
 

@@ -315,10 +315,29 @@ TORQUE_LIMITS_NM = {
               "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)), "Y": 40.0},
     "toe": {"": GOLDMANN_2012_MTP_FLEXION_NM},
 }
-# The axes whose limit has a published figure behind it (above); the report says which these are.
-SOURCED_LIMITS = {("hip", "X"), ("hip", "Z"), ("knee", ""), ("ankle", "X"), ("ankle", "Z"), ("elbow", ""),
-                  ("neck", "X"), ("neck", "Z"), ("neck", "Y"), ("shoulder", "X"), ("shoulder", "Z"),
-                  ("shoulder", "Y"), ("spine", "X"), ("spine", "Z"), ("hip", "Y"), ("toe", "")}
+# Where each limit comes from (above), short enough for a report; an axis without a published figure
+# says so. The report gives this beside each peak.
+LIMIT_SOURCES = {
+    ("hip", "X"): "Anderson, Madigan & Nussbaum 2007, Table 3 (c1 0.161 × weight × height)",
+    ("knee", ""): "Anderson, Madigan & Nussbaum 2007, Table 3 (c1 0.163 × weight × height)",
+    ("ankle", "X"): "Anderson, Madigan & Nussbaum 2007, Table 3 (c1 0.095 × weight × height)",
+    ("hip", "Z"): "Sugimoto et al. 2014 (1.29 N·m/kg × 70.4 kg)",
+    ("hip", "Y"): "Johnson & Hoffman 2010 (0.535 N·m/kg × 70.4 kg)",
+    ("ankle", "Z"): "da Fonseca et al. 2025, Table 1 (inversion 34.8 N·m)",
+    ("elbow", ""): "Lategan & Krüger 2003 (0.78 N·m/kg × 70.4 kg)",
+    ("neck", "X"): "Ann Biomed Eng 2014, doi:10.1007/s10439-014-1046-0 (extension 51 N·m)",
+    ("neck", "Z"): "Ann Biomed Eng 2014, doi:10.1007/s10439-014-1046-0 (lateral bending 32 N·m)",
+    ("neck", "Y"): "Ann Biomed Eng 2014, doi:10.1007/s10439-014-1046-0 (axial rotation 13 N·m)",
+    ("shoulder", "X"): "Dynamic shoulder flexion strength (static flexion at 0°, 89.9 N·m)",
+    ("shoulder", "Z"): "Clin Biomech 1989, doi:10.1016/0268-0033(89)90046-6 (adduction 48.0 N·m)",
+    ("shoulder", "Y"): "Clinics 2011;66(2):313-320, Table 1 (internal rotation 59.5 / 65.3 N·m)",
+    ("spine", "X"): "Chaffin, Andersson & Martin 1999, Table 4.5 (torso extension 288 N·m)",
+    ("spine", "Z"): "Huang et al. 2000 (static lateral flexion, largest 172 N·m)",
+    ("toe", ""): "Goldmann & Brüggemann 2012 (toe flexion 14.2 N·m)",
+}
+# The axes whose limit has a published figure behind it; the report says which these are.
+SOURCED_LIMITS = frozenset(LIMIT_SOURCES)
+UNSOURCED = "not checked: rounded from memory of Harbo, Brincks & Andersen 2012"
 
 
 def torque_limit(dof: str) -> float:
@@ -338,6 +357,17 @@ def torque_limit_sourced(dof: str) -> bool:
     (True, True, False)
     """
     return _joint_axis(dof) in SOURCED_LIMITS
+
+
+def torque_limit_source(dof: str) -> str:
+    """Where the limit of a ragdoll DoF comes from (:data:`LIMIT_SOURCES`), or that it is not checked.
+
+    >>> torque_limit_source("hip.L:Y")
+    'Johnson & Hoffman 2010 (0.535 N·m/kg × 70.4 kg)'
+    >>> torque_limit_source("ankle.R:Y").startswith("not checked")
+    True
+    """
+    return LIMIT_SOURCES.get(_joint_axis(dof), UNSOURCED)
 
 
 def _joint_axis(dof: str) -> tuple[str, str]:

@@ -22,7 +22,8 @@ from scipy.spatial.transform import Rotation
 from stimuli.errors import StimuliError
 from stimuli.physics import inertia
 from stimuli.physics.attainable import reference_under_gravity
-from stimuli.physics.controller import Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit, torque_limit_sourced
+from stimuli.physics.controller import (Gains, motion_gait, set_joint_gains, set_torque_limits, torque_limit,
+                                        torque_limit_source, torque_limit_sourced)
 from stimuli.physics.output import joint_rms_difference, to_motion
 from stimuli.physics.ragdoll import TOES_BY_GAIT, build_ragdoll, compile_model
 from stimuli.physics.reference import build_reference
@@ -145,7 +146,7 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
 
 def torque_peaks(sim) -> dict[str, dict[str, float]]:
     """Per DoF: peak |actuator torque| (N·m) over the recorded pass, the human limit it is held to,
-    and whether that limit has a published figure behind it (``sourced``).
+    whether that limit has a published figure behind it (``sourced``) and which (``source``).
 
     The limit (:data:`stimuli.physics.controller.TORQUE_LIMITS_NM`) is reported whether or not the
     simulation enforced it, so a pure-PD run shows where it asks for more than a strong adult has.
@@ -153,7 +154,8 @@ def torque_peaks(sim) -> dict[str, dict[str, float]]:
     if not len(sim.actuator_force):
         return {}
     peaks = np.abs(sim.actuator_force).max(axis=0)
-    return {d: {"peak": round(float(p), 1), "limit": torque_limit(d), "sourced": torque_limit_sourced(d)}
+    return {d: {"peak": round(float(p), 1), "limit": torque_limit(d), "sourced": torque_limit_sourced(d),
+                "source": torque_limit_source(d)}
             for d, p in zip(sim.dof_names, peaks)}
 
 
