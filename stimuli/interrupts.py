@@ -8,7 +8,8 @@ group, so a child (ffmpeg) can die of it, and its caller fail, before Python rai
 
 :func:`install_interrupt_handler` makes SIGINT set a flag as well as raise; long loops call
 :func:`check_interrupted`, and whatever ends a command after :func:`was_interrupted` turned true
-ends it as the interrupt (exit 130 from ``shapemotion``).
+ends it as the interrupt (exit 130 from ``shapemotion``). A SIGINT the process was started to ignore
+(a job a script starts in the background) stays ignored, as Python itself leaves it.
 
 >>> previous = install_interrupt_handler()
 >>> was_interrupted()
@@ -36,11 +37,14 @@ def install_interrupt_handler():
     """Make Ctrl-C stick: SIGINT sets a flag as well as raising KeyboardInterrupt (the flag is cleared).
 
     Returns the previous handler (for ``signal.signal``), or None outside the main thread, where
-    none can be installed (and the flag is left as it is).
+    none can be installed (and the flag is left as it is). An ignored SIGINT is left ignored (the
+    flag is cleared; the returned ``SIG_IGN`` restores nothing new).
     """
     if threading.current_thread() is not threading.main_thread():
         return None
     _INTERRUPTED.clear()
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        return signal.SIG_IGN
 
     def handler(signum, frame):
         _INTERRUPTED.set()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,11 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PROTOCOLS = ROOT / "protocols"
 os.environ.setdefault("SHAPEMOTION_CACHE", str(ROOT / ".cache"))
+# Ctrl-C as at a terminal, however pytest was started: a shell script's background job (``make test &``)
+# starts with SIGINT ignored, which the commands keep (stimuli.interrupts) and the Ctrl-C tests, and
+# the commands they start, would inherit.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def buttons_enabled(selector: str) -> str:

@@ -90,6 +90,29 @@ def test_ctrl_c_that_comes_back_as_another_error_is_the_interrupt(interrupted, c
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+def test_a_ctrl_c_the_process_was_started_to_ignore_stays_ignored(run_cli, monkeypatch):
+    """A script's background job starts with SIGINT ignored; a command keeps it so, as Python does."""
+    import signal
+
+    from stimuli.commands import render_cmd
+
+    seen = []
+
+    def preview(args):
+        seen.append(signal.getsignal(signal.SIGINT))
+        signal.raise_signal(signal.SIGINT)      # ignored: no KeyboardInterrupt, no exit 130
+        return 0
+
+    monkeypatch.setattr(render_cmd, "run_preview", preview)
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        code, _, err = run_cli("preview", "--stepping", "--body", "sex=M,height=1.8,bmi=25", "--out", "x.mp4")
+        assert (code, err) == (0, "") and seen == [signal.SIG_IGN]
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 def test_the_interrupt_module_examples_run():
     import doctest
 
