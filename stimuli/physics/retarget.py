@@ -144,7 +144,7 @@ def build_report(sim, ragdoll, body, reference_body, weight_kg: float, gains: Ga
     return report
 
 
-def torque_peaks(sim) -> dict[str, dict[str, float]]:
+def torque_peaks(sim) -> dict[str, dict[str, float | bool | str]]:
     """Per DoF: peak |actuator torque| (N·m) over the recorded pass, the human limit it is held to,
     whether that limit has a published figure behind it (``sourced``) and which (``source``).
 
