@@ -79,6 +79,17 @@ def test_doc_hooks_examples_run():
     assert result.attempted >= 1
 
 
+def test_no_list_is_rendered_as_part_of_a_paragraph(site):
+    """Python-Markdown starts a list only after a blank line: a list written straight under a
+    paragraph line renders as that paragraph's text, its dashes inline."""
+    swallowed = []
+    for page in sorted(site.rglob("*.html")):
+        for paragraph in re.findall(r"<p>(.*?)</p>", page.read_text(), re.S):
+            if re.search(r"\n(?:- |\d+\. )\S", paragraph):
+                swallowed.append(f"{page.relative_to(site)}: {paragraph[:80]!r}")
+    assert not swallowed, "\n".join(swallowed)
+
+
 def test_readme_is_two_screens_with_working_links():
     text = (ROOT / "README.md").read_text()
     lines = text.splitlines()
