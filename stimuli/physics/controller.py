@@ -283,10 +283,22 @@ class RootWrench:
 # concentric peaks, below an isometric maximum; every figure was read in a reachable abstract or
 # table (not the paper itself where only an abstract is named), none is in ../shared/seeds.
 #
-# PROVENANCE NOT CHECKED for the two remaining axes, the trunk's axial rotation and the ankle's
-# rotation about the vertical: they were rounded from memory of Harbo, Brincks & Andersen (2012), Eur
-# J Appl Physiol 112:267–275 (isometric Biodex peak torques, sex-specific regressions on age, height
-# and body mass; only its abstract is reachable) and have no published figure behind them here.
+# Ankle rotation about the vertical (Y): no clinical test measures it, but the muscles that turn
+# the foot about the vertical are the invertors and evertors, which act about the subtalar joint's
+# axis, and that axis is oblique: 42° from the transverse plane and 16° from the sagittal plane in
+# the most commonly used model, the mean of cadaver studies (Payne, Munteanu & Miller 2003, J Am
+# Podiatr Med Assoc 93(2):131–135, introduction). A torque T about that axis reads T·cos 42°·cos 16°
+# about the foot's long axis, where the dynamometer measures inversion (da Fonseca et al., above:
+# 34.8 N·m), and T·sin 42° about the vertical, so the same muscles give 34.8 × tan 42° / cos 16° =
+# 32.6 N·m about the vertical: 33 N·m. Derived, not measured: the axis varies from foot to foot,
+# and 33°–51° of inclination would give 24–45 N·m; the talocrural axis's small tilt, which turns a
+# part of the plantar flexors' torque about the vertical too, is not counted (it comes only with
+# plantar flexion).
+#
+# PROVENANCE NOT CHECKED for the one remaining axis, the trunk's axial rotation: it was rounded from
+# memory of Harbo, Brincks & Andersen (2012), Eur J Appl Physiol 112:267–275 (isometric Biodex peak
+# torques, sex-specific regressions on age, height and body mass; only its abstract is reachable)
+# and has no published figure behind it here.
 NORM_BODY_MASS_KG = 23.0 * 1.75**2                            # the base character
 NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * NORM_BODY_MASS_KG * 1.75  # its weight (N) × height (m)
 ANDERSON_2007_C1 = {"hip": 0.161, "knee": 0.163, "ankle": 0.095}
@@ -301,6 +313,21 @@ CHAFFIN_1999_TORSO_EXTENSION_NM = 288.0
 GOLDMANN_2012_MTP_FLEXION_NM = 14.2
 HUANG_2000_TRUNK_LATERAL_FLEXION_NM = 172.0
 JOHNSON_2010_HIP_EXTERNAL_ROTATION_NM_PER_KG = 0.535
+PAYNE_2003_SUBTALAR_AXIS_DEG = {"from_transverse": 42.0, "from_sagittal": 16.0}
+
+
+def _about_the_vertical(inversion_nm: float) -> float:
+    """Torque (N·m) about the vertical of the subtalar muscles that give ``inversion_nm`` about the
+    foot's long axis (:data:`PAYNE_2003_SUBTALAR_AXIS_DEG`): their torque lies along the oblique axis.
+
+    >>> round(_about_the_vertical(34.8), 1)
+    32.6
+    """
+    up = np.radians(PAYNE_2003_SUBTALAR_AXIS_DEG["from_transverse"])
+    medial = np.radians(PAYNE_2003_SUBTALAR_AXIS_DEG["from_sagittal"])
+    return float(inversion_nm * np.tan(up) / np.cos(medial))
+
+
 TORQUE_LIMITS_NM = {
     "spine": {"X": CHAFFIN_1999_TORSO_EXTENSION_NM, "Z": HUANG_2000_TRUNK_LATERAL_FLEXION_NM, "Y": 100.0},
     "neck": dict(NECK_ISOMETRIC_2014_NM),
@@ -312,7 +339,8 @@ TORQUE_LIMITS_NM = {
             "Y": float(round(JOHNSON_2010_HIP_EXTERNAL_ROTATION_NM_PER_KG * NORM_BODY_MASS_KG))},
     "knee": {"": float(round(ANDERSON_2007_C1["knee"] * NORM_BODY_WEIGHT_HEIGHT_NM))},
     "ankle": {"X": float(round(ANDERSON_2007_C1["ankle"] * NORM_BODY_WEIGHT_HEIGHT_NM)),
-              "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)), "Y": 40.0},
+              "Z": float(round(DA_FONSECA_2025_ANKLE_INVERSION_NM)),
+              "Y": float(round(_about_the_vertical(DA_FONSECA_2025_ANKLE_INVERSION_NM)))},
     "toe": {"": GOLDMANN_2012_MTP_FLEXION_NM},
 }
 # Where each limit comes from (above), short enough for a report; an axis without a published figure
@@ -324,6 +352,8 @@ LIMIT_SOURCES = {
     ("hip", "Z"): "Sugimoto et al. 2014 (1.29 N·m/kg × 70.4 kg)",
     ("hip", "Y"): "Johnson & Hoffman 2010 (0.535 N·m/kg × 70.4 kg)",
     ("ankle", "Z"): "da Fonseca et al. 2025, Table 1 (inversion 34.8 N·m)",
+    ("ankle", "Y"): "derived: da Fonseca et al. 2025 inversion 34.8 N·m through the subtalar axis "
+                    "(42° from transverse, 16° from sagittal; Payne et al. 2003): × tan 42° / cos 16°",
     ("elbow", ""): "Lategan & Krüger 2003 (0.78 N·m/kg × 70.4 kg)",
     ("neck", "X"): "Ann Biomed Eng 2014, doi:10.1007/s10439-014-1046-0 (extension 51 N·m)",
     ("neck", "Z"): "Ann Biomed Eng 2014, doi:10.1007/s10439-014-1046-0 (lateral bending 32 N·m)",
@@ -335,7 +365,8 @@ LIMIT_SOURCES = {
     ("spine", "Z"): "Huang et al. 2000 (static lateral flexion, largest 172 N·m)",
     ("toe", ""): "Goldmann & Brüggemann 2012 (toe flexion 14.2 N·m)",
 }
-# The axes whose limit has a published figure behind it; the report says which these are.
+# The axes whose limit has a published figure behind it (read, or derived as the ankle's vertical
+# axis is); the report says which these are.
 SOURCED_LIMITS = frozenset(LIMIT_SOURCES)
 UNSOURCED = "not checked: rounded from memory of Harbo, Brincks & Andersen 2012"
 
@@ -364,7 +395,7 @@ def torque_limit_source(dof: str) -> str:
 
     >>> torque_limit_source("hip.L:Y")
     'Johnson & Hoffman 2010 (0.535 N·m/kg × 70.4 kg)'
-    >>> torque_limit_source("ankle.R:Y").startswith("not checked")
+    >>> torque_limit_source("spine:Y").startswith("not checked")
     True
     """
     return LIMIT_SOURCES.get(_joint_axis(dof), UNSOURCED)
