@@ -6,6 +6,11 @@ STAMP := $(VENV)/.setup-done
 # Debian packages the project needs: EGL/OSMesa for offscreen rendering, Chromium for browser tests.
 APT_PACKAGES := libegl1 libgl1 libosmesa6 chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# The suite runs on one pytest-xdist worker per core, at most 4 (each worker loads its own Anny
+# model; several tests start two processes of their own). A test file stays on one worker
+# (--dist loadfile), so a module's fixtures are built once. TEST_WORKERS=0 runs it in this process.
+TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
+PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 .PHONY: setup test test-fast demo bench docs clean
 
@@ -23,10 +28,10 @@ $(STAMP): pyproject.toml Makefile $(wildcard package.json package-lock.json)
 	@touch $(STAMP)
 
 test: setup
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 test-fast: setup
-	$(PY) -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 demo: setup
 	$(VENV)/bin/shapemotion demo --out demo_output
