@@ -5,6 +5,9 @@ Marked slow: the first Anny load ever builds its cache (about a minute); later l
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +25,8 @@ TABLE2 = {  # the paper's Table 2 (SPEC §1.1)
 }
 
 
-PROTOCOLS = Path(__file__).resolve().parents[1] / "protocols"
+ROOT = Path(__file__).resolve().parents[1]
+PROTOCOLS = ROOT / "protocols"
 
 
 @pytest.fixture(scope="module")
@@ -251,3 +255,36 @@ def test_warp_no_cuda_line_is_held_back_and_other_native_output_passes(capfd):
         os.write(2, b"something else went wrong\n")
     err = capfd.readouterr().err
     assert NO_CUDA_DRIVER not in err and "something else went wrong" in err
+
+
+BUILD_TWICE = """
+import sys, time
+import anny
+from stimuli.bodies import backend
+
+class Model:   # stands for anny.Anny: a build that takes a second, its start and end recorded
+    def __init__(self, **kwargs):
+        start = time.time()
+        time.sleep(1.0)
+        with open(sys.argv[1], "a") as log:
+            log.write(f"{start} {time.time()}\\n")
+
+    def eval(self):
+        return self
+
+anny.Anny = Model
+backend.model()
+"""
+
+
+def test_two_processes_starting_on_one_anny_cache_build_one_after_the_other(tmp_path):
+    """Anny writes its cache in place: two processes starting together on an empty cache (two test or
+    render workers on a fresh clone) must not read each other's half-written files. Real processes,
+    real ``flock``: the second build starts after the first has ended."""
+    script, log = tmp_path / "build.py", tmp_path / "builds.txt"
+    script.write_text(BUILD_TWICE)
+    env = {**os.environ, "ANNY_CACHE_DIR": str(tmp_path / "anny"), "PYTHONPATH": str(ROOT)}
+    runs = [subprocess.Popen([sys.executable, str(script), str(log)], env=env) for _ in range(2)]
+    assert [run.wait(timeout=120) for run in runs] == [0, 0]
+    (s1, e1), (s2, e2) = sorted(tuple(map(float, line.split())) for line in log.read_text().splitlines())
+    assert e1 <= s2, f"the builds overlapped: {s1:.2f}–{e1:.2f} and {s2:.2f}–{e2:.2f}"

@@ -85,6 +85,30 @@ def _native_stderr_without(benign: str):
                     print(line, file=sys.stderr)
 
 
+@contextlib.contextmanager
+def one_builder_at_a_time(folder: Path):
+    """Hold an exclusive ``flock`` on Anny's cache folder while a process builds or loads the model.
+
+    Anny writes its cache files in place, so a process starting while another is still writing an
+    empty cache (two test workers, two render or Dask workers on a fresh clone) could read a file
+    cut short, take it for damaged and remove it under the writer. The second process waits here
+    instead and then loads the finished files (a load takes well under a second). The lock is on
+    the folder itself, so no lock file is left behind, and the kernel drops it however the process
+    ends. Where ``flock`` does not exist (Windows) nothing is locked.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)   # closing the descriptor releases the lock
+
+
 def drop_damaged_safetensors(folder: Path) -> list[Path]:
     """Remove the ``.safetensors`` files under ``folder`` whose header or data do not read (a file
     cut short); return them. Files that read are kept.
@@ -132,17 +156,18 @@ def model():
     cache.mkdir(parents=True, exist_ok=True)
     set_anny_cache_path(cache)
     start = time.perf_counter()
-    try:
-        built = anny.Anny(extrapolate_phenotypes=True)
-    except Exception:
-        # Anny writes its cache in place: a write cut short (a full disk) leaves a file that every
-        # later start fails on. Remove only the files that do not read, and build them again.
-        damaged = drop_damaged_safetensors(cache)
-        if not damaged:
-            raise
-        print(f"Anny's model cache {cache}: {len(damaged)} damaged file(s) (a write cut short) removed; "
-              "building them again (about a minute)", file=sys.stderr)
-        built = anny.Anny(extrapolate_phenotypes=True)
+    with one_builder_at_a_time(cache):
+        try:
+            built = anny.Anny(extrapolate_phenotypes=True)
+        except Exception:
+            # Anny writes its cache in place: a write cut short (a full disk) leaves a file that every
+            # later start fails on. Remove only the files that do not read, and build them again.
+            damaged = drop_damaged_safetensors(cache)
+            if not damaged:
+                raise
+            print(f"Anny's model cache {cache}: {len(damaged)} damaged file(s) (a write cut short) removed; "
+                  "building them again (about a minute)", file=sys.stderr)
+            built = anny.Anny(extrapolate_phenotypes=True)
     built.eval()
     LOAD_SECONDS["model"] = time.perf_counter() - start
     return built
