@@ -295,10 +295,11 @@ class RootWrench:
 # part of the plantar flexors' torque about the vertical too, is not counted (it comes only with
 # plantar flexion).
 #
-# PROVENANCE NOT CHECKED for the one remaining axis, the trunk's axial rotation: it was rounded from
-# memory of Harbo, Brincks & Andersen (2012), Eur J Appl Physiol 112:267–275 (isometric Biodex peak
-# torques, sex-specific regressions on age, height and body mass; only its abstract is reachable)
-# and has no published figure behind it here.
+# PROVENANCE NOT CHECKED for the one remaining axis, the trunk's axial rotation: 100 N·m was written
+# from memory and has no published figure behind it. It used to be put down to Harbo, Brincks &
+# Andersen (2012), Eur J Appl Physiol 112:267–275, but their regressions (18 tests, transcribed with
+# their coefficients in github.com/dambach/app_strength-Harbo, coeff_men.csv) cover the knee, ankle,
+# hip, shoulder, elbow and wrist, and no trunk axis.
 NORM_BODY_MASS_KG = 23.0 * 1.75**2                            # the base character
 NORM_BODY_WEIGHT_HEIGHT_NM = 9.81 * NORM_BODY_MASS_KG * 1.75  # its weight (N) × height (m)
 ANDERSON_2007_C1 = {"hip": 0.161, "knee": 0.163, "ankle": 0.095}
@@ -368,7 +369,7 @@ LIMIT_SOURCES = {
 # The axes whose limit has a published figure behind it (read, or derived as the ankle's vertical
 # axis is); the report says which these are.
 SOURCED_LIMITS = frozenset(LIMIT_SOURCES)
-UNSOURCED = "not checked: rounded from memory of Harbo, Brincks & Andersen 2012"
+UNSOURCED = "not checked: written from memory, no published figure found"
 
 
 def torque_limit(dof: str) -> float:
