@@ -7,6 +7,7 @@ import csv
 import io
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 from stimuli.errors import StimuliError
@@ -130,6 +131,30 @@ def save_figure(fig, path: str | Path, dpi: float = 110) -> Path:
     with matplotlib.rc_context({"svg.hashsalt": "shapemotion"}):
         fig.savefig(path, dpi=dpi, metadata=FIGURE_METADATA.get(path.suffix.lower()))
     return path
+
+
+@contextmanager
+def folder_lock(folder: str | Path, busy: str | None = None):
+    """Hold an exclusive ``flock`` on a folder (on the folder itself, so no lock file is left behind,
+    and the kernel drops it however the process ends).
+
+    Without ``busy``, wait for another process's lock; with it, do not wait: a folder another process
+    holds raises ``StimuliError(busy)``. Where ``flock`` does not exist (Windows) nothing is locked.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (fcntl.LOCK_NB if busy else 0))
+        except BlockingIOError:
+            raise StimuliError(busy) from None
+        yield
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
 
 
 def source_digest(*folders: str, suffixes: tuple[str, ...] = (".py", ".json", ".bvh", ".vert", ".frag")) -> str:

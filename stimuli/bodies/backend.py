@@ -85,30 +85,6 @@ def _native_stderr_without(benign: str):
                     print(line, file=sys.stderr)
 
 
-@contextlib.contextmanager
-def one_builder_at_a_time(folder: Path):
-    """Hold an exclusive ``flock`` on Anny's cache folder while a process builds or loads the model.
-
-    Anny writes its cache files in place, so a process starting while another is still writing an
-    empty cache (two test workers, two render or Dask workers on a fresh clone) could read a file
-    cut short, take it for damaged and remove it under the writer. The second process waits here
-    instead and then loads the finished files (a load takes well under a second). The lock is on
-    the folder itself, so no lock file is left behind, and the kernel drops it however the process
-    ends. Where ``flock`` does not exist (Windows) nothing is locked.
-    """
-    try:
-        import fcntl
-    except ImportError:
-        yield
-        return
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)   # closing the descriptor releases the lock
-
-
 def drop_damaged_safetensors(folder: Path) -> list[Path]:
     """Remove the ``.safetensors`` files under ``folder`` whose header or data do not read (a file
     cut short); return them. Files that read are kept.
@@ -151,12 +127,17 @@ def model():
     import anny
     from anny.paths import set_anny_cache_path
 
+    from stimuli.fileio import folder_lock
+
     LOAD_SECONDS["import"] = time.perf_counter() - start
     cache = anny_cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     set_anny_cache_path(cache)
     start = time.perf_counter()
-    with one_builder_at_a_time(cache):
+    # Anny writes its cache files in place, so a process starting while another still writes an
+    # empty cache (two test, render or Dask workers on a fresh clone) could read a file cut short and
+    # remove it as damaged under the writer: one process builds or loads at a time, the next waits.
+    with folder_lock(cache):
         try:
             built = anny.Anny(extrapolate_phenotypes=True)
         except Exception:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from stimuli.errors import StimuliError
+from stimuli.fileio import folder_lock
 from stimuli.interrupts import check_interrupted, install_interrupt_handler, was_interrupted
 from stimuli.render.clip import Look
 from stimuli.render.manifest import MANIFEST, manifest_row, read_manifest, with_all_columns, write_manifest
@@ -300,29 +301,14 @@ def sweep_temporaries(out_dir: str | Path) -> list[Path]:
     return removed
 
 
-@contextmanager
 def output_lock(out_dir: Path):
-    """Hold an exclusive lock on the render folder (``flock`` on the folder itself, so no lock file is
-    left behind, and the kernel drops it however the process ends).
+    """Hold an exclusive lock on the render folder (:func:`stimuli.fileio.folder_lock`).
 
     Two renders into one folder would each take the other's temporary files for leftovers, and race
-    on the manifest; the second is refused. Where ``flock`` does not exist (Windows) nothing is locked.
+    on the manifest; the second is refused.
     """
-    try:
-        import fcntl
-    except ImportError:
-        yield
-        return
-    fd = os.open(out_dir, os.O_RDONLY)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise StimuliError(f"{out_dir}: another 'shapemotion render' is writing into this folder; let it "
-                               "finish, or render into another --out folder") from None
-        yield
-    finally:
-        os.close(fd)  # closing the descriptor releases the lock
+    return folder_lock(out_dir, busy=f"{out_dir}: another 'shapemotion render' is writing into this folder; "
+                                    "let it finish, or render into another --out folder")
 
 
 NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
